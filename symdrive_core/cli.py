@@ -1,0 +1,60 @@
+"""``symdrive`` command line: thin dispatch to the library.
+
+Each area registers its own subcommands from a light ``commands`` module (heavy imports happen
+inside the handlers, so ``symdrive plan`` never loads torch or a diffusion model). Errors in the
+user's input print one line naming the file and field and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+
+from .errors import SymDriveError
+
+# Modules that add subcommands; each defines ``add_commands(subparsers)``.
+COMMAND_MODULES = [
+    "symdrive_core.commands",
+    "symdrive_core.splat.commands",
+    "symdrive_core.optim.commands",
+    "symdrive_core.diffusion.commands",
+    "symdrive_core.traffic.commands",
+    "symdrive_core.pipeline.commands",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="symdrive", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name and name.startswith(exc.name):  # area not built yet
+                continue
+            raise
+        module.add_commands(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SymDriveError as exc:
+        print(f"symdrive {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"symdrive {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def print_json(obj) -> None:
+    print(json.dumps(obj, indent=1))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

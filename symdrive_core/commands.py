@@ -1,0 +1,44 @@
+"""Foundation subcommands: ``validate`` (scene packages) and ``info`` (splat PLY files)."""
+
+from __future__ import annotations
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser("validate", help="check a scene package's manifest.json and the files it names")
+    p.add_argument("manifest", help="manifest.json or the package directory")
+    p.add_argument("--no-files", action="store_true", help="skip the check that referenced files exist")
+    p.set_defaults(func=_validate)
+
+    p = sub.add_parser("info", help="count, SH degree and bounds of a 3DGS splat PLY")
+    p.add_argument("ply")
+    p.add_argument("--drop-invalid", action="store_true", help="ignore splats with NaN/Inf values")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_info)
+
+
+def _validate(args) -> int:
+    from .scene import check_files, load_manifest
+
+    m = load_manifest(args.manifest)
+    if not args.no_files:
+        check_files(m)
+    print(f"{m.path}: valid (version 1, {len(m.frames)} frames, {len(m.cameras)} cameras, "
+          f"{len(m.actors)} actors)")
+    return 0
+
+
+def _info(args) -> int:
+    from .cli import print_json
+    from .io.ply import describe, read_splats
+
+    info = describe(args.ply, read_splats(args.ply, drop_invalid=args.drop_invalid))
+    if args.json:
+        print_json(info)
+    else:
+        lo, hi = info["bounds_min"], info["bounds_max"]
+        print(f"{info['path']}: {info['count']} splats, SH degree {info['sh_degree']}")
+        print("  bounds min: " + " ".join(f"{v:.3f}" for v in lo))
+        print("  bounds max: " + " ".join(f"{v:.3f}" for v in hi))
+        if info["extra_properties"]:
+            print("  extra properties: " + ", ".join(info["extra_properties"]))
+    return 0

@@ -1,0 +1,1 @@
+"""File formats: splat PLY (numpy only), images via OpenImageIO, atomic writes."""

@@ -1,0 +1,271 @@
+"""INRIA 3DGS splat PLY files, read and written with numpy structured arrays.
+
+Reads binary little/big-endian and ascii; SH degree 0..3 is inferred from the number of
+``f_rest_*`` properties (stored channel-major: all of red's higher coefficients, then green's,
+then blue's). Properties the format does not define are kept in ``Gaussians.extra``. numpy only.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..gaussians import Gaussians, sh_coeff_count
+from .atomic import atomic_path
+
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "ascii"}
+REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+            "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+_KNOWN = set(REQUIRED) | {"nx", "ny", "nz"}
+_F_REST = re.compile(r"^f_rest_(\d+)$")
+
+
+@dataclass
+class _Element:
+    name: str
+    count: int
+    properties: list[tuple[str, str | tuple[str, str]]]  # (name, type) or (name, (count_t, item_t))
+
+    @property
+    def has_lists(self) -> bool:
+        return any(isinstance(t, tuple) for _, t in self.properties)
+
+
+@dataclass
+class PlyHeader:
+    fmt: str  # "<", ">" or "ascii"
+    elements: list[_Element]
+    data_offset: int
+
+    def element(self, name: str) -> _Element | None:
+        return next((e for e in self.elements if e.name == name), None)
+
+
+def read_header(path: str | os.PathLike) -> PlyHeader:
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise InputError(path, f"cannot open: {exc.strerror}") from None
+    with f:
+        if f.readline().strip() != b"ply":
+            raise InputError(path, "not a PLY file (first line is not 'ply')")
+        fmt = None
+        elements: list[_Element] = []
+        while True:
+            raw = f.readline()
+            if not raw:
+                raise InputError(path, "header has no 'end_header' line")
+            words = raw.decode("ascii", errors="replace").split()
+            if not words or words[0] in ("comment", "obj_info"):
+                continue
+            if words[0] == "end_header":
+                break
+            if words[0] == "format":
+                if len(words) < 2 or words[1] not in _FORMATS:
+                    raise InputError(path, f"unsupported format line {raw.strip()!r}", "header.format")
+                fmt = _FORMATS[words[1]]
+            elif words[0] == "element":
+                try:
+                    elements.append(_Element(words[1], int(words[2]), []))
+                except (IndexError, ValueError):
+                    raise InputError(path, f"bad element line {raw.strip()!r}", "header") from None
+            elif words[0] == "property":
+                if not elements:
+                    raise InputError(path, "property before any element", "header")
+                el = elements[-1]
+                try:
+                    if words[1] == "list":
+                        el.properties.append((words[4], (_PLY_TYPES[words[2]], _PLY_TYPES[words[3]])))
+                    else:
+                        el.properties.append((words[2], _PLY_TYPES[words[1]]))
+                except (IndexError, KeyError):
+                    raise InputError(path, f"bad property line {raw.strip()!r}", f"element {el.name}") from None
+        if fmt is None:
+            raise InputError(path, "header has no format line", "header.format")
+        return PlyHeader(fmt, elements, f.tell())
+
+
+def _read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
+    vertex = header.element("vertex")
+    if vertex is None:
+        raise InputError(path, "no 'vertex' element: not a point or splat file", "element vertex")
+    if vertex.has_lists:
+        raise InputError(path, "list properties in the vertex element are not supported", "element vertex")
+    if header.fmt == "ascii":
+        return _read_ascii_vertices(path, header, vertex)
+    offset = header.data_offset
+    for el in header.elements:
+        if el is vertex:
+            break
+        if el.has_lists:
+            raise InputError(path, f"element '{el.name}' with list properties precedes the vertices", "header")
+        offset += el.count * np.dtype([(n, header.fmt + t) for n, t in el.properties]).itemsize
+    dtype = np.dtype([(n, header.fmt + t) for n, t in vertex.properties])
+    need = offset + vertex.count * dtype.itemsize
+    size = path.stat().st_size
+    if size < need:
+        have = max(0, (size - offset) // dtype.itemsize)
+        raise InputError(
+            path,
+            f"truncated: header declares {vertex.count} vertices ({need} bytes with the header) "
+            f"but the file has {size} bytes (room for {have} vertices)",
+            "element vertex",
+        )
+    table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=offset)
+    return table
+
+
+def _read_ascii_vertices(path: Path, header: PlyHeader, vertex: _Element) -> np.ndarray:
+    with open(path, "rb") as f:
+        f.seek(header.data_offset)
+        lines = f.read().decode("ascii", errors="replace").splitlines()
+    skip = 0
+    for el in header.elements:
+        if el is vertex:
+            break
+        skip += el.count
+    rows = [ln for ln in lines[skip: skip + vertex.count]]
+    if len(rows) < vertex.count:
+        raise InputError(path, f"header declares {vertex.count} vertices, file has {len(rows)} rows",
+                         "element vertex")
+    try:
+        values = np.array([r.split() for r in rows], dtype=np.float64)
+    except ValueError:
+        raise InputError(path, "vertex rows have a varying number of values or non-numbers",
+                         "element vertex") from None
+    n_props = len(vertex.properties)
+    if values.ndim != 2 or values.shape[1] != n_props:
+        raise InputError(path, f"vertex rows must have {n_props} values", "element vertex")
+    dtype = np.dtype([(n, t) for n, t in vertex.properties])
+    table = np.empty(vertex.count, dtype=dtype)
+    for i, (name, _) in enumerate(vertex.properties):
+        table[name] = values[:, i]
+    return table
+
+
+def _stack(table: np.ndarray, names: list[str]) -> np.ndarray:
+    out = np.empty((table.shape[0], len(names)), dtype=np.float32)
+    for i, n in enumerate(names):
+        out[:, i] = table[n]
+    return out
+
+
+def sh_rest_names(degree: int) -> list[str]:
+    return [f"f_rest_{i}" for i in range(3 * (sh_coeff_count(degree) - 1))]
+
+
+def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gaussians:
+    """Read an INRIA 3DGS PLY into unactivated :class:`Gaussians`.
+
+    Raises :class:`InputError` naming the file and the field for anything that is not a valid
+    splat file. Non-finite values are an error unless ``drop_invalid`` drops those splats.
+    """
+    path = Path(path)
+    header = read_header(path)
+    table = _read_vertex_table(path, header)
+    names = list(table.dtype.names or ())
+    missing = [n for n in REQUIRED if n not in names]
+    if missing:
+        kind = "not a 3DGS splat file" if len(missing) > 3 else "missing required property"
+        raise InputError(path, f"{kind}: no {', '.join(missing)}", "element vertex")
+    rest_idx = sorted(int(m.group(1)) for n in names if (m := _F_REST.match(n)))
+    if rest_idx != list(range(len(rest_idx))):
+        raise InputError(path, "f_rest_* properties are not numbered 0..M-1", "element vertex")
+    if len(rest_idx) % 3:
+        raise InputError(path, f"{len(rest_idx)} f_rest_* properties is not a multiple of 3", "f_rest")
+    k = len(rest_idx) // 3 + 1
+    degree = int(round(np.sqrt(k))) - 1
+    if (degree + 1) ** 2 != k or degree > 3:
+        raise InputError(path, f"{len(rest_idx)} f_rest_* properties matches no SH degree 0..3", "f_rest")
+
+    n = table.shape[0]
+    sh = np.empty((n, k, 3), dtype=np.float32)
+    sh[:, 0, :] = _stack(table, ["f_dc_0", "f_dc_1", "f_dc_2"])
+    if k > 1:
+        rest = _stack(table, sh_rest_names(degree)).reshape(n, 3, k - 1)
+        sh[:, 1:, :] = rest.transpose(0, 2, 1)
+    normals = _stack(table, ["nx", "ny", "nz"]) if {"nx", "ny", "nz"} <= set(names) else None
+    extra = {nm: np.ascontiguousarray(table[nm]) for nm in names
+             if nm not in _KNOWN and not _F_REST.match(nm)}
+    g = Gaussians(
+        means=_stack(table, ["x", "y", "z"]),
+        quats=_stack(table, ["rot_0", "rot_1", "rot_2", "rot_3"]),
+        log_scales=_stack(table, ["scale_0", "scale_1", "scale_2"]),
+        opacity_logits=np.ascontiguousarray(table["opacity"], dtype=np.float32),
+        sh=sh,
+        normals=normals,
+        extra=extra,
+    )
+    ok = g.finite_mask()
+    bad = int(n - ok.sum())
+    if bad:
+        if not drop_invalid:
+            raise InputError(path, f"{bad} of {n} splats have NaN or Inf values "
+                                   "(use --drop-invalid to drop them)", "element vertex")
+        g = g.subset(ok)
+    return g
+
+
+def write_splats(path: str | os.PathLike, g: Gaussians, *, keep_extra: bool = True) -> None:
+    """Write binary little-endian INRIA 3DGS PLY atomically."""
+    n, k = len(g), g.sh.shape[1]
+    fields = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+    fields += sh_rest_names(g.sh_degree)
+    fields += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    extra = {name: v for name, v in g.extra.items() if keep_extra and v.shape == (n,)}
+    dtype = [(f, "<f4") for f in fields] + [(name, v.dtype.newbyteorder("<").str) for name, v in extra.items()]
+    table = np.empty(n, dtype=dtype)
+    cols = {
+        "x": g.means[:, 0], "y": g.means[:, 1], "z": g.means[:, 2],
+        "f_dc_0": g.sh[:, 0, 0], "f_dc_1": g.sh[:, 0, 1], "f_dc_2": g.sh[:, 0, 2],
+        "opacity": g.opacity_logits,
+    }
+    normals = g.normals if g.normals is not None else np.zeros((n, 3), np.float32)
+    for i, c in enumerate("xyz"):
+        cols[f"n{c}"] = normals[:, i]
+    for i in range(3):
+        cols[f"scale_{i}"] = g.log_scales[:, i]
+    for i in range(4):
+        cols[f"rot_{i}"] = g.quats[:, i]
+    if k > 1:
+        rest = g.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)
+        for i, name in enumerate(sh_rest_names(g.sh_degree)):
+            cols[name] = rest[:, i]
+    cols.update(extra)
+    for name in table.dtype.names:
+        table[name] = cols[name]
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}"]
+    inv = {v: key for key, v in _PLY_TYPES.items() if key in ("char", "uchar", "short", "ushort", "int", "uint", "float", "double")}
+    for name in table.dtype.names:
+        header.append(f"property {inv[table.dtype[name].str[1:]]} {name}")
+    header.append("end_header")
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        table.tofile(f)
+
+
+def describe(path: str | os.PathLike, g: Gaussians | None = None) -> dict:
+    """Summary for ``symdrive info``: count, SH degree, bounds, extra properties."""
+    g = read_splats(path) if g is None else g
+    lo, hi = g.bounds()
+    return {
+        "path": str(path),
+        "count": len(g),
+        "sh_degree": g.sh_degree,
+        "bounds_min": [float(v) for v in lo],
+        "bounds_max": [float(v) for v in hi],
+        "has_normals": g.normals is not None,
+        "extra_properties": sorted(g.extra),
+    }

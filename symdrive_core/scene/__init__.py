@@ -1,0 +1,9 @@
+"""Scene packages: manifest (versioned, validated), cameras, poses and trajectories. numpy only."""
+
+from .manifest import (Actor, Camera, CameraFrame, Effects, Frame, IdMap, Manifest, ManifestError,
+                       MaskEntry, check_files, load_manifest, parse_manifest)
+from .poses import Pose, interpolate_pose, matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
+
+__all__ = ["Actor", "Camera", "CameraFrame", "Effects", "Frame", "IdMap", "Manifest", "ManifestError",
+           "MaskEntry", "Pose", "check_files", "interpolate_pose", "load_manifest", "matrix_to_quat",
+           "parse_manifest", "quat_multiply", "quat_slerp", "quat_to_matrix"]
