@@ -99,8 +99,9 @@ def blender_intrinsics(
 
     Blender fits the sensor to the larger image side for ``AUTO`` (measured in aspect-corrected
     pixels), to the width for ``HORIZONTAL`` and to the height for ``VERTICAL``. Lens shift is a
-    fraction of that fitted size; positive ``shift_y`` moves the image content down, i.e. the
-    principal point up (smaller v in OpenCV's y-down pixels).
+    fraction of that fitted size; positive ``shift_x`` moves the view window right, so the optical
+    axis lands left of the image centre (smaller u); positive ``shift_y`` moves it up, so the
+    optical axis below the image centre (larger v in OpenCV's y-down pixels).
     """
     fit = sensor_fit.upper()
     aspect_w = width * pixel_aspect_x

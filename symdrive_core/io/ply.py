@@ -240,7 +240,7 @@ def write_splats(path: str | os.PathLike, g: Gaussians, *, keep_extra: bool = Tr
     for i in range(4):
         cols[f"rot_{i}"] = g.quats[:, i]
     if k > 1:
-        rest = g.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, -1)
+        rest = g.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, 3 * (k - 1))
         for i, name in enumerate(sh_rest_names(g.sh_degree)):
             cols[name] = rest[:, i]
     cols.update(extra)

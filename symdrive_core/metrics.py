@@ -1,0 +1,113 @@
+"""Image quality metrics: PSNR, SSIM (3DGS flavour), masked variants, Frechet distance.
+
+SSIM follows the 3DGS evaluation code: 11x11 Gaussian window, sigma 1.5, C1 = 0.01^2,
+C2 = 0.03^2, zero padding ("same" convolution), mean over channels and pixels. Other
+implementations (scikit-image's, for one) differ in the third decimal.
+Images are [H, W, C] (numpy or torch) in [0, 1]; torch versions are differentiable.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_C1 = 0.01 ** 2
+SSIM_C2 = 0.03 ** 2
+
+
+def _t(x, dtype=None) -> torch.Tensor:
+    t = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+    return t.to(dtype) if dtype is not None else t
+
+
+def _gaussian_window(dtype, device) -> torch.Tensor:
+    x = torch.arange(SSIM_WINDOW, dtype=torch.float64) - SSIM_WINDOW // 2
+    g = torch.exp(-(x ** 2) / (2 * SSIM_SIGMA ** 2))
+    g = g / g.sum()
+    return (g[:, None] * g[None, :]).to(dtype=dtype, device=device)
+
+
+def ssim_map(a, b) -> torch.Tensor:
+    """Per-pixel SSIM [H, W] (mean over channels) of two [H, W, C] images."""
+    a, b = _t(a), _t(b)
+    dtype = a.dtype if a.is_floating_point() else torch.float32
+    x = a.to(dtype).permute(2, 0, 1)[None]
+    y = b.to(dtype).permute(2, 0, 1)[None]
+    c = x.shape[1]
+    w = _gaussian_window(dtype, x.device).expand(c, 1, SSIM_WINDOW, SSIM_WINDOW)
+    pad = SSIM_WINDOW // 2
+
+    def blur(z):
+        return F.conv2d(z, w, padding=pad, groups=c)
+
+    mu_x, mu_y = blur(x), blur(y)
+    sxx = blur(x * x) - mu_x ** 2
+    syy = blur(y * y) - mu_y ** 2
+    sxy = blur(x * y) - mu_x * mu_y
+    num = (2 * mu_x * mu_y + SSIM_C1) * (2 * sxy + SSIM_C2)
+    den = (mu_x ** 2 + mu_y ** 2 + SSIM_C1) * (sxx + syy + SSIM_C2)
+    return (num / den)[0].mean(0)
+
+
+def _masked_mean(values: torch.Tensor, mask) -> torch.Tensor:
+    if mask is None:
+        return values.mean()
+    m = _t(mask, values.dtype)
+    if m.ndim == 3:
+        m = m[..., 0]
+    total = m.sum()
+    if total <= 0:
+        raise ValueError("mask is empty: the masked metric is undefined")
+    return (values * m).sum() / total
+
+
+def ssim(a, b, mask=None) -> float:
+    """Mean SSIM; with ``mask`` [H, W], the mean of the SSIM map over the masked pixels."""
+    with torch.no_grad():
+        return float(_masked_mean(ssim_map(a, b), mask))
+
+
+def mse(a, b, mask=None) -> float:
+    a, b = _t(a, torch.float64), _t(b, torch.float64)
+    return float(_masked_mean(((a - b) ** 2).mean(-1), mask))
+
+
+def psnr(a, b, mask=None) -> float:
+    """PSNR in dB for images in [0, 1]; ``mask`` restricts it to a region."""
+    err = mse(a, b, mask)
+    return float("inf") if err == 0 else float(10.0 * np.log10(1.0 / err))
+
+
+def bbox_crop(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
+    """Bounding box of a mask's non-zero pixels as slices (None if empty)."""
+    ys, xs = np.nonzero(np.asarray(mask) > 0)
+    if ys.size == 0:
+        return None
+    h, w = np.asarray(mask).shape[:2]
+    return (slice(max(0, ys.min() - margin), min(h, ys.max() + 1 + margin)),
+            slice(max(0, xs.min() - margin), min(w, xs.max() + 1 + margin)))
+
+
+def frechet_distance(feats_a: np.ndarray, feats_b: np.ndarray) -> float:
+    """Frechet distance between Gaussians fitted to two feature sets [N, D].
+
+    ||mu_a - mu_b||^2 + Tr(S_a + S_b - 2 (S_a S_b)^(1/2)); the square root is taken as
+    S_a^(1/2) S_b S_a^(1/2) symmetrised, whose eigenvalues are real and non-negative, so it stays
+    stable where S_a S_b is near singular (few samples).
+    """
+    a = np.asarray(feats_a, dtype=np.float64)
+    b = np.asarray(feats_b, dtype=np.float64)
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or min(len(a), len(b)) < 2:
+        raise ValueError("frechet_distance needs two [N, D] feature arrays with N >= 2")
+    mu_a, mu_b = a.mean(0), b.mean(0)
+    s_a, s_b = np.cov(a, rowvar=False), np.cov(b, rowvar=False)
+    s_a, s_b = np.atleast_2d(s_a), np.atleast_2d(s_b)
+    ea, va = np.linalg.eigh(s_a)
+    sqrt_a = (va * np.sqrt(np.clip(ea, 0, None))) @ va.T
+    m = sqrt_a @ s_b @ sqrt_a
+    em = np.linalg.eigvalsh(0.5 * (m + m.T))
+    tr_sqrt = np.sqrt(np.clip(em, 0, None)).sum()
+    return float(((mu_a - mu_b) ** 2).sum() + np.trace(s_a) + np.trace(s_b) - 2.0 * tr_sqrt)

@@ -1,0 +1,1 @@
+"""Optimisation: losses, 3DGS reconstruction, colour/opacity fine-tuning, refinement."""

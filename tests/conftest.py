@@ -1,0 +1,79 @@
+"""Shared fixtures: tiny scene packages and splat clouds made in the test, never downloaded."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symdrive_core import conventions
+from symdrive_core.gaussians import Gaussians
+from symdrive_core.io.ply import write_splats
+
+
+def random_gaussians(n: int, degree: int = 0, seed: int = 0, center=(0.0, 0.0, 0.0), spread=1.0) -> Gaussians:
+    rng = np.random.default_rng(seed)
+    k = (degree + 1) ** 2
+    return Gaussians(
+        means=(np.asarray(center) + spread * rng.normal(size=(n, 3))).astype(np.float32),
+        quats=rng.normal(size=(n, 4)).astype(np.float32),
+        log_scales=(rng.normal(size=(n, 3)) - 3.0).astype(np.float32),
+        opacity_logits=rng.normal(size=n).astype(np.float32),
+        sh=(0.3 * rng.normal(size=(n, k, 3))).astype(np.float32),
+    )
+
+
+def look_at_c2w(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """OpenCV camera-to-world looking from ``eye`` at ``target`` (y down, z forward)."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    c2w = np.eye(4)
+    c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = x, y, z, eye
+    return c2w
+
+
+def manifest_dict(n_frames=3, width=32, height=24, actors=("car_0",), lateral=(), sun=None,
+                  harmonize=False, background="background.ply") -> dict:
+    """A small valid manifest: a camera driving along +X, actors ahead of it."""
+    K = conventions.intrinsics_from_fov(width, height, np.deg2rad(60.0))
+    frames, cam_frames = [], []
+    for i in range(n_frames):
+        c2w = look_at_c2w((i * 1.0, 0.0, 1.5), (i * 1.0 + 10.0, 0.0, 1.0))
+        frames.append({"index": i, "timestamp": i * 0.1})
+        cam_frames.append({"K": K.tolist(), "camera_to_world": c2w.tolist(),
+                           "world_to_camera": conventions.invert_rigid(c2w).tolist()})
+    return {
+        "format": "symdrive-scene", "version": 1, "name": "tiny",
+        "frames": frames,
+        "cameras": [{"name": "front", "width": width, "height": height, "frames": cam_frames}],
+        "background": {"splats": background},
+        "actors": [{"id": a, "kind": "inserted", "assets": {"splats": f"{a}.ply"}, "wlh": [1.8, 4.5, 1.5],
+                    "poses": [{"translation": [8.0 + i, 2.0 * j - 1.0, 0.75], "rotation": [1, 0, 0, 0]}
+                              for i in range(n_frames)]} for j, a in enumerate(actors)],
+        "effects": {"lateral_offsets": list(lateral), "harmonize": harmonize, "shadows": sun is not None,
+                    "sun_direction": sun},
+    }
+
+
+@pytest.fixture
+def make_package(tmp_path):
+    """Write a tiny scene package (manifest + splat files) and return the manifest path."""
+
+    def _make(name="pkg", **kwargs) -> Path:
+        root = tmp_path / name
+        root.mkdir()
+        d = manifest_dict(**kwargs)
+        if d["background"]["splats"]:
+            write_splats(root / d["background"]["splats"], random_gaussians(200, 0, 1, (10, 0, 1), 3.0))
+        for j, a in enumerate(d["actors"]):
+            write_splats(root / a["assets"]["splats"], random_gaussians(50, 1, 10 + j, spread=0.8))
+        (root / "manifest.json").write_text(json.dumps(d))
+        return root / "manifest.json"
+
+    return _make

@@ -1,0 +1,110 @@
+import copy
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+
+from symdrive_core.cli import main
+from symdrive_core.scene import ManifestError, check_files, load_manifest, parse_manifest
+from symdrive_core.scene.manifest import SCHEMA_PATH
+from tests.conftest import manifest_dict
+
+
+def _parse(d, tmp_path):
+    return parse_manifest(d, tmp_path / "manifest.json")
+
+
+def test_valid_manifest_loads_typed(tmp_path):
+    m = _parse(manifest_dict(n_frames=4, actors=("a", "b"), lateral=(1.0, -1.0), sun=[0, 0, -2]), tmp_path)
+    assert len(m.frames) == 4 and m.cameras[0].frames[3].K.shape == (3, 3)
+    assert [a.id for a in m.actors] == ["a", "b"] and [a.instance_id for a in m.actors] == [1, 2]
+    np.testing.assert_allclose(m.effects.sun_direction, [0, 0, -1])
+    np.testing.assert_allclose(m.actor("b").pose(2).translation, [10.0, 1.0, 0.75])
+    cf = m.cameras[0].frames[1]
+    np.testing.assert_allclose(cf.world_to_camera @ cf.camera_to_world, np.eye(4), atol=1e-12)
+
+
+def test_round_trip_through_save(tmp_path):
+    m = _parse(manifest_dict(actors=("a",), lateral=(0.5,)), tmp_path)
+    m.actors[0].poses[1] = None
+    path = m.save(tmp_path / "manifest.json")
+    m2 = load_manifest(tmp_path)
+    assert m2.to_json() == m.to_json() and m2.actors[0].poses[1] is None
+    assert json.loads(path.read_text())["conventions"]["pixel_center"] == 0.5
+
+
+def test_schema_accepts_what_the_loader_writes(tmp_path):
+    schema = json.loads(SCHEMA_PATH.read_text())
+    m = _parse(manifest_dict(actors=("a", "b"), sun=[1, 0, -1]), tmp_path)
+    jsonschema.validate(m.to_json(), schema)
+    jsonschema.validate(manifest_dict(), schema)
+
+
+def _mutated(fn):
+    d = manifest_dict(n_frames=3, actors=("a", "b", "c"))
+    fn(d)
+    return d
+
+
+@pytest.mark.parametrize("mutate,field,message", [
+    (lambda d: d["actors"][2]["poses"][1].update(rotation=[1, 0, 0]), r"actors\[2\]\.poses\[1\]\.rotation", "expected 4 numbers"),
+    (lambda d: d["actors"][1]["poses"][0].update(rotation=[0, 0, 0, 0]), r"actors\[1\]\.poses\[0\]\.rotation", "zero quaternion"),
+    (lambda d: d["actors"][0]["poses"].pop(), r"actors\[0\]\.poses", "expected 3 entries"),
+    (lambda d: d["actors"][0].update(kind="parked"), r"actors\[0\]\.kind", "expected one of existing, inserted"),
+    (lambda d: d["actors"][1].update(id="a"), r"actors\[1\]\.id", "duplicate actor id"),
+    (lambda d: d["actors"][0].update(wlh=[1, -2, 1]), r"actors\[0\]\.wlh", "positive"),
+    (lambda d: d["actors"][0].update(assets={}), r"actors\[0\]\.assets", "splat PLY and/or a mesh"),
+    (lambda d: d["cameras"][0]["frames"][2].update(K=[[1, 0, 0], [0, 1, 0]]), r"cameras\[0\]\.frames\[2\]\.K", "3x3"),
+    (lambda d: d["cameras"][0]["frames"][1]["camera_to_world"][0].__setitem__(0, 2.0),
+     r"cameras\[0\]\.frames\[1\]\.camera_to_world", "not a rigid transform"),
+    (lambda d: d["cameras"][0]["frames"][1]["world_to_camera"][0].__setitem__(3, 99.0),
+     r"cameras\[0\]\.frames\[1\]\.world_to_camera", "not the inverse"),
+    (lambda d: d["cameras"][0].update(width=0), r"cameras\[0\]\.width", ">= 1"),
+    (lambda d: d["frames"][2].update(timestamp=0.0), r"frames\[2\]\.timestamp", "increase"),
+    (lambda d: d.pop("version"), "version", "required field is missing"),
+    (lambda d: d.update(version=7), "version", "understands version 1"),
+    (lambda d: d["effects"].update(sun_direction=[0, 0, 0]), r"effects\.sun_direction", "zero vector"),
+    (lambda d: d["effects"].update(lateral_offsets=[1, "x"]), r"effects\.lateral_offsets\[1\]", "finite number"),
+    (lambda d: d.update(masks={"entries": [{"camera": "front", "frame": 0, "actor": "zz"}]}),
+     r"masks\.entries\[0\]\.actor", "no actor with id 'zz'"),
+    (lambda d: d.update(masks={"entries": [{"camera": "front", "frame": 9, "actor": "a"}]}),
+     r"masks\.entries\[0\]\.frame", "out of range"),
+    (lambda d: d.update(masks={"id_maps": [{"camera": "front", "frame": 0, "path": "x.png", "ids": {"0": "a"}}]}),
+     r"masks\.id_maps\[0\]\.ids", "positive integer"),
+])
+def test_errors_name_the_field_path(tmp_path, mutate, field, message):
+    with pytest.raises(ManifestError, match=f"manifest.json: {field}: .*{message}"):
+        _parse(_mutated(mutate), tmp_path)
+
+
+def test_check_files_names_missing_file(make_package):
+    path = make_package()
+    m = load_manifest(path)
+    check_files(m)
+    (path.parent / "car_0.ply").unlink()
+    with pytest.raises(ManifestError, match=r"actors\[0\]\.assets\.splats: file not found: car_0\.ply"):
+        check_files(m)
+
+
+def test_cli_validate_exit_codes(make_package, capsys):
+    path = make_package()
+    assert main(["validate", str(path)]) == 0
+    assert "valid" in capsys.readouterr().out
+    d = json.loads(path.read_text())
+    bad = copy.deepcopy(d)
+    bad["actors"][0]["poses"][1]["rotation"] = [1, 2]
+    path.write_text(json.dumps(bad))
+    assert main(["validate", str(path)]) == 2
+    assert "actors[0].poses[1].rotation: expected 4 numbers" in capsys.readouterr().err
+    path.write_text("{not json")
+    assert main(["validate", str(path)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+def test_cli_info(make_package, capsys):
+    path = make_package()
+    assert main(["info", str(path.parent / "car_0.ply")]) == 0
+    out = capsys.readouterr().out
+    assert "50 splats, SH degree 1" in out and "bounds min" in out
+    assert main(["info", str(path.parent / "nope.ply")]) == 2

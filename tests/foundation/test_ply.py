@@ -1,0 +1,147 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from plyfile import PlyData, PlyElement
+
+from symdrive_core.errors import InputError
+from symdrive_core.io.ply import REQUIRED, describe, read_splats, sh_rest_names, write_splats
+from tests.conftest import random_gaussians
+
+
+def _assert_same(a, b):
+    for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(0, 300), degree=st.integers(0, 3), seed=st.integers(0, 2**16))
+def test_round_trip_any_degree_and_size(tmp_path_factory, n, degree, seed):
+    g = random_gaussians(n, degree, seed)
+    path = tmp_path_factory.mktemp("ply") / "s.ply"
+    write_splats(path, g)
+    h = read_splats(path)
+    assert h.sh_degree == degree and len(h) == n
+    _assert_same(g, h)
+
+
+def _plyfile_write(path, n, degree, byte_order="<", text=False, drop=(), extra=()):
+    rng = np.random.default_rng(0)
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", *sh_rest_names(degree),
+             "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3", *extra]
+    names = [nm for nm in names if nm not in drop]
+    arr = np.empty(n, dtype=[(nm, "f4") for nm in names])
+    for i, nm in enumerate(names):
+        arr[nm] = rng.normal(size=n) if not nm.startswith("f_rest") else float(nm.split("_")[-1])
+    el = PlyElement.describe(arr, "vertex")
+    PlyData([el], text=text, byte_order=byte_order).write(str(path))
+    return arr
+
+
+def test_channel_major_f_rest_layout(tmp_path):
+    # f_rest_i holds the value i: channel-major means red's 15 coefficients come first.
+    _plyfile_write(tmp_path / "d3.ply", 4, 3)
+    g = read_splats(tmp_path / "d3.ply")
+    assert g.sh.shape == (4, 16, 3)
+    np.testing.assert_array_equal(g.sh[0, 1:, 0], np.arange(0, 15))
+    np.testing.assert_array_equal(g.sh[0, 1:, 1], np.arange(15, 30))
+    np.testing.assert_array_equal(g.sh[0, 1:, 2], np.arange(30, 45))
+
+
+@pytest.mark.parametrize("byte_order,text", [(">", False), ("<", True)])
+def test_big_endian_and_ascii(tmp_path, byte_order, text):
+    arr = _plyfile_write(tmp_path / "f.ply", 7, 1, byte_order=byte_order, text=text)
+    g = read_splats(tmp_path / "f.ply")
+    assert g.sh_degree == 1
+    np.testing.assert_allclose(g.means[:, 0], arr["x"], rtol=1e-6)
+    np.testing.assert_allclose(g.quats[:, 3], arr["rot_3"], rtol=1e-6)
+
+
+def test_extra_properties_kept_normals_optional(tmp_path):
+    _plyfile_write(tmp_path / "e.ply", 5, 0, drop=("nx", "ny", "nz"), extra=("semantic", "t_birth"))
+    g = read_splats(tmp_path / "e.ply")
+    assert g.normals is None and sorted(g.extra) == ["semantic", "t_birth"]
+    write_splats(tmp_path / "back.ply", g)
+    assert sorted(read_splats(tmp_path / "back.ply").extra) == ["semantic", "t_birth"]
+
+
+def test_element_before_vertices_is_skipped(tmp_path):
+    arr = _plyfile_write(tmp_path / "v.ply", 3, 0)
+    cam = np.zeros(2, dtype=[("fx", "f8"), ("fy", "f8")])
+    PlyData([PlyElement.describe(cam, "camera"), PlyElement.describe(arr, "vertex")]).write(str(tmp_path / "c.ply"))
+    np.testing.assert_array_equal(read_splats(tmp_path / "c.ply").means[:, 2], arr["z"])
+
+
+def test_missing_field_names_it(tmp_path):
+    _plyfile_write(tmp_path / "m.ply", 3, 0, drop=("opacity",))
+    with pytest.raises(InputError, match=r"m\.ply.*missing required property: no opacity"):
+        read_splats(tmp_path / "m.ply")
+
+
+def test_plain_point_cloud_is_not_a_splat_file(tmp_path):
+    arr = np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "u1")])
+    PlyData([PlyElement.describe(arr, "vertex")]).write(str(tmp_path / "pc.ply"))
+    with pytest.raises(InputError, match="not a 3DGS splat file: no f_dc_0"):
+        read_splats(tmp_path / "pc.ply")
+
+
+def test_truncated_file(tmp_path):
+    path = tmp_path / "t.ply"
+    write_splats(path, random_gaussians(100, 2))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) - 500])
+    with pytest.raises(InputError, match=r"truncated: header declares 100 vertices.*room for 9\d"):
+        read_splats(path)
+
+
+def test_ascii_row_count_mismatch(tmp_path):
+    path = tmp_path / "a.ply"
+    _plyfile_write(path, 4, 0, text=True)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[:-1]) + "\n")
+    with pytest.raises(InputError, match="declares 4 vertices, file has 3 rows"):
+        read_splats(path)
+
+
+def test_nan_reported_and_droppable(tmp_path):
+    g = random_gaussians(10, 0)
+    g.means[2, 0] = np.nan
+    g.opacity_logits[5] = np.inf
+    write_splats(tmp_path / "n.ply", g)
+    with pytest.raises(InputError, match="2 of 10 splats have NaN or Inf.*--drop-invalid"):
+        read_splats(tmp_path / "n.ply")
+    assert len(read_splats(tmp_path / "n.ply", drop_invalid=True)) == 8
+
+
+@pytest.mark.parametrize("content,message", [
+    (b"not a ply", "not a PLY file"),
+    (b"ply\nformat binary_little_endian 1.0\nelement vertex 1\n", "no 'end_header'"),
+    (b"ply\nformat weird 1.0\nend_header\n", "unsupported format"),
+])
+def test_bad_headers(tmp_path, content, message):
+    (tmp_path / "b.ply").write_bytes(content)
+    with pytest.raises(InputError, match=message):
+        read_splats(tmp_path / "b.ply")
+
+
+def test_bad_f_rest_count(tmp_path):
+    _plyfile_write(tmp_path / "r.ply", 2, 1, drop=("f_rest_8",))
+    with pytest.raises(InputError, match="f_rest"):
+        read_splats(tmp_path / "r.ply")
+
+
+def test_describe_and_required_fields(tmp_path):
+    g = random_gaussians(20, 3)
+    write_splats(tmp_path / "s.ply", g)
+    info = describe(tmp_path / "s.ply")
+    assert info["count"] == 20 and info["sh_degree"] == 3
+    np.testing.assert_allclose(info["bounds_min"], g.means.min(0), rtol=1e-6)
+    assert len(REQUIRED) == 14
+
+
+def test_activated_views():
+    g = random_gaussians(5, 0)
+    np.testing.assert_allclose(g.scales, np.exp(g.log_scales), rtol=1e-6)
+    np.testing.assert_allclose(g.opacities, 1 / (1 + np.exp(-g.opacity_logits)), rtol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(g.unit_quats, axis=1), 1.0, rtol=1e-6)
+    g.quats[0] = 0.0
+    np.testing.assert_array_equal(g.unit_quats[0], [1, 0, 0, 0])
