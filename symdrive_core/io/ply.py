@@ -124,7 +124,7 @@ def _read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
             "element vertex",
         )
     table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=offset)
-    return table
+    return table if dtype.isnative else table.astype(dtype.newbyteorder("="))
 
 
 def _read_ascii_vertices(path: Path, header: PlyHeader, vertex: _Element) -> np.ndarray:
@@ -156,6 +156,12 @@ def _read_ascii_vertices(path: Path, header: PlyHeader, vertex: _Element) -> np.
 
 
 def _stack(table: np.ndarray, names: list[str]) -> np.ndarray:
+    """Columns ``names`` of the vertex table as one float32 [N, len(names)] array."""
+    fields = table.dtype.fields
+    if all(fields[n][0] == np.dtype("=f4") for n in table.dtype.names):
+        # Homogeneous float32 rows (every 3DGS exporter writes these): one strided gather.
+        flat = table.view(np.float32).reshape(table.shape[0], len(table.dtype.names))
+        return flat[:, [table.dtype.names.index(n) for n in names]]
     out = np.empty((table.shape[0], len(names)), dtype=np.float32)
     for i, n in enumerate(names):
         out[:, i] = table[n]

@@ -1,0 +1,241 @@
+"""The effects planner: derive the minimal stage list for one scene package, with reasons.
+
+"Simulate only the effects a scene calls for": the plan is read off the manifest and the
+asset headers alone (no torch, no model), so ``symdrive plan`` is instant and the runner
+never loads a diffusion model for a scene that needs none.
+
+* no inserted actor (or harmonization off)   -> no harmonize / finetune, no diffusion model
+* no lateral offsets                          -> no restore / refine
+* actor outside every frustum in a frame      -> not rendered, not harmonized in that frame
+* no sun                                      -> no shadow region in the harmonization mask
+* every asset SH degree 0                     -> no SH evaluation (colour is the DC term)
+* stage inputs unchanged since the last run   -> its cached result is reused
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io.ply import read_header, read_splats
+from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
+
+STAGES = ("reconstruct", "render", "restore", "refine", "harmonize", "shadow_region", "finetune",
+          "sh_eval", "evaluate")
+DIFFUSION_STAGES = ("restore", "harmonize")
+
+
+@dataclass
+class StageDecision:
+    name: str
+    run: bool
+    reason: str
+    frames: list[int] | None = None
+    actors: list[str] | None = None
+    cached: bool = False
+
+
+@dataclass
+class PlanOptions:
+    refine: bool = True
+    evaluate: bool = True
+    near: float = 0.01
+
+
+@dataclass
+class Plan:
+    scene: str
+    frames: int
+    cameras: list[str]
+    stages: list[StageDecision]
+    visible: dict[str, dict[int, list[str]]]  # camera -> frame -> actor ids to render
+    culled: dict[str, dict[int, list[str]]]  # camera -> frame -> actor ids dropped
+    sh_degrees: dict[str, int]
+    inputs_hash: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def stage(self, name: str) -> StageDecision:
+        return next(s for s in self.stages if s.name == name)
+
+    def runs(self, name: str) -> bool:
+        return self.stage(name).run
+
+    @property
+    def needs_diffusion(self) -> bool:
+        return any(self.runs(n) for n in DIFFUSION_STAGES)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["needs_diffusion"] = self.needs_diffusion
+        return d
+
+
+def sh_degree_of(path: Path) -> int:
+    """SH degree from a PLY header alone (count of f_rest_* properties), without reading data."""
+    header = read_header(path)
+    vertex = header.element("vertex")
+    n_rest = sum(1 for name, _ in (vertex.properties if vertex else []) if name.startswith("f_rest_"))
+    return int(round(np.sqrt(n_rest // 3 + 1))) - 1
+
+
+def actor_local_box(manifest: Manifest, actor) -> tuple[np.ndarray, np.ndarray]:
+    """Local bounds of an actor: its ``wlh`` box, else its splats' extent (3 sigma padded)."""
+    if actor.wlh is not None:
+        return vehicle_local_box(actor.wlh)
+    g = read_splats(manifest.resolve(actor.splats))
+    pad = 3.0 * g.scales.max(axis=1, initial=0.0)[:, None]
+    return (g.means - pad).min(axis=0), (g.means + pad).max(axis=0)
+
+
+def inputs_hash(manifest: Manifest) -> str:
+    """Fingerprint of the manifest and the size/mtime of every file it names."""
+    h = hashlib.sha256(json.dumps(manifest.to_json(), sort_keys=True).encode())
+    for p in sorted(str(p) for p in manifest.root.rglob("*") if p.is_file() and "output" not in p.parts):
+        st = Path(p).stat()
+        h.update(f"{p}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()[:16]
+
+
+def _visibility(manifest: Manifest, near: float):
+    visible: dict[str, dict[int, list[str]]] = {}
+    culled: dict[str, dict[int, list[str]]] = {}
+    boxes = {a.id: actor_local_box(manifest, a) for a in manifest.actors}
+    for cam in manifest.cameras:
+        visible[cam.name], culled[cam.name] = {}, {}
+        for fi, cf in enumerate(cam.frames):
+            vis, cul = [], []
+            for a in manifest.actors:
+                pose = a.pose(fi)
+                if pose is None:
+                    continue
+                corners = box_corners_world(*boxes[a.id], pose.R, pose.translation)
+                (vis if box_in_frustum(corners, cf.world_to_camera, cf.K, cam.width, cam.height, near)
+                 else cul).append(a.id)
+            visible[cam.name][fi], culled[cam.name][fi] = vis, cul
+    return visible, culled
+
+
+def _has_ground_truth(manifest: Manifest) -> bool:
+    return any(cf.image for cam in manifest.cameras for cf in cam.frames)
+
+
+def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None) -> Plan:
+    """Decide every stage for this scene. ``previous`` is the last run's state (for caching)."""
+    opt = options or PlanOptions()
+    eff = manifest.effects
+    visible, culled = _visibility(manifest, opt.near)
+    frames_all = list(range(len(manifest.frames)))
+    stages: list[StageDecision] = []
+
+    if manifest.background_splats:
+        stages.append(StageDecision("reconstruct", False, "background splats given"))
+    elif manifest.background_points and _has_ground_truth(manifest):
+        stages.append(StageDecision("reconstruct", True, "no background splats: fit them to the images",
+                                    frames_all))
+    else:
+        stages.append(StageDecision("reconstruct", False, "no background splats and no images to fit"))
+
+    stages.append(StageDecision("render", True, "always", frames_all,
+                                sorted({a for cam in visible.values() for ids in cam.values() for a in ids})))
+
+    if eff.lateral_offsets:
+        offs = ", ".join(f"{o:g}" for o in eff.lateral_offsets)
+        stages.append(StageDecision("restore", True, f"lateral offsets {offs} m requested", frames_all))
+        stages.append(StageDecision("refine", opt.refine, "refine the reconstruction on restored views"
+                                    if opt.refine else "refinement disabled"))
+    else:
+        stages.append(StageDecision("restore", False, "no lateral offsets"))
+        stages.append(StageDecision("refine", False, "no restored views"))
+
+    inserted = [a.id for a in manifest.inserted_actors]
+    seen = {a for cam in visible.values() for ids in cam.values() for a in ids}
+    harm_actors = [a for a in inserted if a in seen]
+    harm_frames = sorted({fi for cam in visible.values() for fi, ids in cam.items()
+                          if any(a in harm_actors for a in ids)})
+    if not inserted:
+        harm = StageDecision("harmonize", False, "no inserted actor")
+    elif not eff.harmonize:
+        harm = StageDecision("harmonize", False, "harmonization off in the scene's effects")
+    elif not harm_frames:
+        harm = StageDecision("harmonize", False, "inserted actors are outside every frustum")
+    else:
+        harm = StageDecision("harmonize", True, f"{len(harm_actors)} inserted actor(s) visible",
+                             harm_frames, harm_actors)
+    stages.append(harm)
+    if not harm.run:
+        stages.append(StageDecision("shadow_region", False, "nothing harmonized"))
+    elif eff.sun_direction is None:
+        stages.append(StageDecision("shadow_region", False, "no sun in the scene"))
+    elif not eff.shadows:
+        stages.append(StageDecision("shadow_region", False, "shadows off in the scene's effects"))
+    else:
+        stages.append(StageDecision("shadow_region", True, "sun present: shadow region joins the mask",
+                                    harm_frames, harm_actors))
+    if harm.run and eff.finetune:
+        stages.append(StageDecision("finetune", True, "fit inserted actors' colour and opacity to the "
+                                    "harmonized frames", harm_frames, harm_actors))
+    else:
+        stages.append(StageDecision("finetune", False, "nothing harmonized" if not harm.run
+                                    else "fine-tuning off in the scene's effects"))
+
+    degrees = {}
+    if manifest.background_splats:
+        degrees["background"] = sh_degree_of(manifest.resolve(manifest.background_splats))
+    for a in manifest.actors:
+        if a.splats:
+            degrees[a.id] = sh_degree_of(manifest.resolve(a.splats))
+    top = max(degrees.values(), default=0)
+    stages.append(StageDecision("sh_eval", top > 0, f"SH degree up to {top}" if top > 0
+                                else "all assets are SH degree 0: colour is the DC term"))
+
+    has_gt = _has_ground_truth(manifest) or bool(manifest.ground_truth)
+    stages.append(StageDecision("evaluate", has_gt and opt.evaluate,
+                                "ground truth in the package" if has_gt and opt.evaluate
+                                else ("evaluation disabled" if has_gt else "no ground truth")))
+
+    plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,
+                visible, culled, degrees, inputs_hash(manifest))
+    if previous and previous.get("inputs_hash") == plan.inputs_hash:
+        for s in plan.stages:
+            if s.run and s.name in previous.get("completed", []):
+                s.cached, s.reason = True, s.reason + " (cached: inputs unchanged)"
+    return plan
+
+
+def format_plan(plan: Plan) -> str:
+    lines = [f"scene {plan.scene}: {plan.frames} frame(s), camera(s) {', '.join(plan.cameras)}"]
+    for s in plan.stages:
+        mark = "cached" if s.cached else ("run" if s.run else "skip")
+        extra = ""
+        if s.run and s.frames is not None:
+            extra += f"  frames {_ranges(s.frames)}"
+        if s.run and s.actors:
+            extra += f"  actors {', '.join(s.actors)}"
+        lines.append(f"  {mark:6s} {s.name:14s} {s.reason}{extra}")
+    for cam, frames in plan.culled.items():
+        by_actor: dict[str, list[int]] = {}
+        for fi, ids in frames.items():
+            for a in ids:
+                by_actor.setdefault(a, []).append(fi)
+        for a, fis in by_actor.items():
+            lines.append(f"  culled {a} in {cam} frames {_ranges(fis)} (outside the frustum)")
+    lines.append(f"  diffusion model: {'needed' if plan.needs_diffusion else 'not loaded'}")
+    return "\n".join(lines)
+
+
+def _ranges(frames: list[int]) -> str:
+    if not frames:
+        return "none"
+    out, start, prev = [], frames[0], frames[0]
+    for f in frames[1:] + [None]:
+        if f is not None and f == prev + 1:
+            prev = f
+            continue
+        out.append(f"{start}" if start == prev else f"{start}-{prev}")
+        if f is not None:
+            start = prev = f
+    return ",".join(out)

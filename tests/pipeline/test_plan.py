@@ -1,0 +1,112 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from symdrive_core.cli import main
+from symdrive_core.io.ply import write_splats
+from symdrive_core.pipeline.plan import format_plan, make_plan, sh_degree_of
+from symdrive_core.scene import box_corners_world, box_in_frustum, load_manifest
+from tests.conftest import look_at_c2w, random_gaussians
+
+
+def _stages(plan):
+    return {s.name: s.run for s in plan.stages}
+
+
+def test_full_scene_runs_every_effect(make_package):
+    m = load_manifest(make_package(lateral=(1.0, 2.0), sun=[1, 0, -1], harmonize=True))
+    m.effects.finetune = True
+    plan = make_plan(m)
+    assert _stages(plan) == {"reconstruct": False, "render": True, "restore": True, "refine": True,
+                             "harmonize": True, "shadow_region": True, "finetune": True,
+                             "sh_eval": True, "evaluate": False}
+    assert plan.needs_diffusion
+
+
+def test_no_inserted_actor_no_diffusion(make_package):
+    plan = make_plan(load_manifest(make_package(actors=(), harmonize=True)))
+    assert not plan.runs("harmonize") and plan.stage("harmonize").reason == "no inserted actor"
+    assert not plan.runs("finetune") and not plan.runs("restore")
+    assert not plan.needs_diffusion
+
+
+def test_no_sun_no_shadow_region(make_package):
+    plan = make_plan(load_manifest(make_package(harmonize=True, sun=None)))
+    assert plan.runs("harmonize")
+    assert not plan.runs("shadow_region") and plan.stage("shadow_region").reason == "no sun in the scene"
+
+
+def test_three_scenes_three_stage_lists(make_package):
+    demo = make_plan(load_manifest(make_package("demo", lateral=(1.0,), harmonize=True, sun=[0, 1, -1])))
+    empty = make_plan(load_manifest(make_package("empty", actors=(), lateral=(1.0,), sun=[0, 1, -1])))
+    dark = make_plan(load_manifest(make_package("dark", lateral=(1.0,), harmonize=True, sun=None)))
+    lists = [tuple(s.name for s in p.stages if s.run) for p in (demo, empty, dark)]
+    assert len(set(lists)) == 3
+
+
+def test_actor_outside_every_frustum_is_culled(make_package):
+    path = make_package(actors=("ahead", "behind"), harmonize=True)
+    d = json.loads(path.read_text())
+    d["actors"][1]["poses"] = [{"translation": [-40.0, 0, 0.75], "rotation": [1, 0, 0, 0]}] * 3
+    path.write_text(json.dumps(d))
+    plan = make_plan(load_manifest(path))
+    assert all(ids == ["ahead"] for ids in plan.visible["front"].values())
+    assert all(ids == ["behind"] for ids in plan.culled["front"].values())
+    assert plan.stage("harmonize").actors == ["ahead"]
+    assert "culled behind in front frames 0-2" in format_plan(plan)
+
+
+def test_sh_degree_zero_skips_sh_eval(make_package, tmp_path):
+    path = make_package()
+    write_splats(path.parent / "background.ply", random_gaussians(20, 0))
+    write_splats(path.parent / "car_0.ply", random_gaussians(20, 0))
+    plan = make_plan(load_manifest(path))
+    assert plan.sh_degrees == {"background": 0, "car_0": 0}
+    assert not plan.runs("sh_eval")
+    write_splats(path.parent / "car_0.ply", random_gaussians(20, 2))
+    assert sh_degree_of(path.parent / "car_0.ply") == 2
+    assert make_plan(load_manifest(path)).runs("sh_eval")
+
+
+def test_unchanged_inputs_are_cached(make_package):
+    path = make_package(harmonize=True)
+    first = make_plan(load_manifest(path))
+    state = {"inputs_hash": first.inputs_hash, "completed": ["render"]}
+    again = make_plan(load_manifest(path), previous=state)
+    assert again.stage("render").cached and not again.stage("harmonize").cached
+    write_splats(path.parent / "car_0.ply", random_gaussians(21, 1))
+    changed = make_plan(load_manifest(path), previous=state)
+    assert changed.inputs_hash != first.inputs_hash and not changed.stage("render").cached
+
+
+def test_frustum_test_explicit():
+    K = np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]])
+    w2c = np.linalg.inv(look_at_c2w((0, 0, 1), (10, 0, 1)))
+    box = lambda t: box_corners_world([-1, -1, -1], [1, 1, 1], np.eye(3), t)
+    assert box_in_frustum(box([10, 0, 1]), w2c, K, 64, 48)
+    assert not box_in_frustum(box([-10, 0, 1]), w2c, K, 64, 48)      # behind
+    assert not box_in_frustum(box([10, 30, 1]), w2c, K, 64, 48)      # far left
+    assert box_in_frustum(box([0.5, 0, 1]), w2c, K, 64, 48)          # camera inside the box
+
+
+def test_plan_command_never_imports_torch_or_diffusion(make_package):
+    path = make_package(actors=())
+    code = ("import sys\nfrom symdrive_core.cli import main\n"
+            f"rc = main(['plan', {str(path)!r}])\n"
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'diffusers')"
+            " or m.startswith('symdrive_core.diffusion.') and m != 'symdrive_core.diffusion.commands']\n"
+            "print('LOADED', bad)\nsys.exit(rc)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert "LOADED []" in out.stdout
+    assert "skip   harmonize      no inserted actor" in out.stdout
+
+
+def test_plan_command_json(make_package, capsys):
+    assert main(["plan", str(make_package(lateral=(0.5,))), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["needs_diffusion"] is True
+    assert [s["name"] for s in data["stages"]][:3] == ["reconstruct", "render", "restore"]
