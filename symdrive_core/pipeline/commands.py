@@ -1,4 +1,4 @@
-"""Pipeline subcommands: ``plan`` (what a scene needs, without running it)."""
+"""Pipeline subcommands: ``plan`` (what a scene needs, without running it) and ``run``."""
 
 from __future__ import annotations
 
@@ -9,6 +9,14 @@ def add_commands(sub) -> None:
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
     p.set_defaults(func=_plan)
+
+    p = sub.add_parser("run", help="run a scene package's plan: render, restore, harmonize, ... (resumable)")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
+    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--no-refine", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_run)
 
 
 def _plan(args) -> int:
@@ -21,4 +29,16 @@ def _plan(args) -> int:
         print_json(plan.to_json())
     else:
         print(format_plan(plan))
+    return 0
+
+
+def _run(args) -> int:
+    from .plan import PlanOptions
+    from .run import run_scene
+
+    report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
+                       device=args.device, progress=not args.quiet)
+    for s in report["stages"]:
+        took = f" ({s['seconds']:.1f} s)" if "seconds" in s else ""
+        print(f"{'ran ' if s['ran'] else 'skip'} {s['name']}: {s['reason']}{took}")
     return 0

@@ -1,0 +1,39 @@
+"""``report.json``: what ran, why, how long, and what was measured (shape in REPORT.md).
+
+Only measured numbers go in; a metric that could not be measured is left out.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..io.atomic import write_text_atomic
+
+REPORT_VERSION = 1
+
+
+@dataclass
+class Report:
+    scene: str
+    device: str
+    stages: list[dict] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+
+    def stage(self, name: str, ran: bool, reason: str, seconds: float | None = None, **details) -> None:
+        row = {"name": name, "ran": ran, "reason": reason}
+        if seconds is not None:
+            row["seconds"] = round(float(seconds), 3)
+        row.update(details)
+        self.stages.append(row)
+
+    def to_json(self) -> dict:
+        return {"version": REPORT_VERSION, "scene": self.scene, "device": self.device,
+                "stages": self.stages, "metrics": self.metrics, **self.extra}
+
+    def write(self, out_dir: Path) -> Path:
+        path = Path(out_dir) / "report.json"
+        write_text_atomic(path, json.dumps(self.to_json(), indent=1) + "\n")
+        return path
