@@ -1,4 +1,4 @@
-"""Pipeline subcommands: ``plan`` (what a scene needs, without running it) and ``run``."""
+"""Pipeline subcommands: ``plan`` (what a scene needs, without running it) ``run`` and ``batch``."""
 
 from __future__ import annotations
 
@@ -17,6 +17,15 @@ def add_commands(sub) -> None:
     p.add_argument("--no-refine", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)
+
+    p = sub.add_parser("batch", help="run many scene packages, in-process or on a Ray cluster")
+    p.add_argument("packages", nargs="+", help="scene package directories or manifest.json files")
+    p.add_argument("--out", required=True, help="output root; each scene gets a subdirectory")
+    p.add_argument("--executor", choices=["local", "ray"], default="local")
+    p.add_argument("--address", help="Ray cluster address (default: start a local one)")
+    p.add_argument("--frames-per-task", type=int, default=4)
+    p.add_argument("--device", default="cpu")
+    p.set_defaults(func=_batch)
 
 
 def _plan(args) -> int:
@@ -41,4 +50,15 @@ def _run(args) -> int:
     for s in report["stages"]:
         took = f" ({s['seconds']:.1f} s)" if "seconds" in s else ""
         print(f"{'ran ' if s['ran'] else 'skip'} {s['name']}: {s['reason']}{took}")
+    return 0
+
+
+def _batch(args) -> int:
+    from .batch import run_batch
+
+    reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
+                        frames_per_task=args.frames_per_task, device=args.device)
+    for r in reports:
+        ran = [s["name"] for s in r["stages"] if s["ran"]]
+        print(f"{r['scene']}: ran {', '.join(ran)}")
     return 0

@@ -1,0 +1,65 @@
+"""``symdrive traffic``: SUMO traffic (and scripted manoeuvres) as the actors of a new scene package."""
+
+from __future__ import annotations
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser("traffic", help="simulate traffic on the package's road with SUMO; write a new package "
+                                       "whose actors are the vehicles")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--density", type=float, required=True, help="vehicles per km per lane (0 = no traffic)")
+    p.add_argument("--seconds", type=float, required=True,
+                   help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--speed", type=float, default=None, help="speed limit in m/s (default 13.89; 0 = standing)")
+    p.add_argument("--manoeuvre", help="manoeuvre spec JSON (cut_in, lane_change, hard_brake), run through TraCI")
+    p.add_argument("--assets", nargs="+", help="vehicle asset folders (with wlh.json) or folders holding them; "
+                                               "default: the asset folders inside the package")
+    p.add_argument("--out", help="output package directory (default: PACKAGE-traffic beside the package)")
+    p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
+    p.add_argument("--lanes", type=int, default=2, help="lanes of a --road road (default 2)")
+    p.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit for SUMO in seconds")
+    p.set_defaults(func=_traffic)
+
+
+def _traffic(args) -> int:
+    import tempfile
+    from pathlib import Path
+
+    from ..errors import InputError
+    from ..scene import load_manifest
+    from .assets import asset_pool
+    from .manoeuvre_spec import load_manoeuvres
+    from .package import check_output_path, traffic_manifest, write_package
+    from .road import road_from_json, road_from_spec
+    from .simulate import DEFAULT_SPEED, TrafficOptions, simulate
+
+    src = load_manifest(args.package)
+    if args.road:
+        road = road_from_spec(args.road, lanes=args.lanes)
+    elif "road" in src.ground_truth:
+        road = road_from_json(src.ground_truth["road"], src.path)
+    else:
+        raise InputError(src.path, "no road: add one to the package or pass --road straight:LENGTH",
+                         "ground_truth.road")
+    out = Path(args.out) if args.out else src.root.parent / f"{src.root.name}-traffic"
+    check_output_path(src, out)
+    assets = asset_pool([Path(a) for a in args.assets] if args.assets else [src.root])
+    opt = TrafficOptions(density=args.density, seconds=args.seconds, seed=args.seed,
+                         speed=DEFAULT_SPEED if args.speed is None else args.speed,
+                         manoeuvres=load_manoeuvres(args.manoeuvre) if args.manoeuvre else [],
+                         timeout=args.timeout)
+    with tempfile.TemporaryDirectory(prefix="symdrive-traffic-") as tmp:
+        run = simulate(road, [f.timestamp for f in src.frames], assets, opt, Path(tmp), where=str(src.path))
+        manifest, gaps = traffic_manifest(src, road, run, assets, opt, out)
+        path = write_package(manifest, Path(tmp))
+    print(f"{path}: {len(manifest.actors)} vehicles over {len(manifest.frames)} frames "
+          f"({run.vehicles_at_start} on the road at the start; SUMO {run.sumo_seconds:.2f} s)")
+    if gaps.min_gap is None:
+        print("minimum gap: no frame has two vehicles")
+    else:
+        print(f"minimum gap: {gaps.min_gap:.3f} m (frame {gaps.frame}, {gaps.pair[0]} and {gaps.pair[1]}); "
+              "overlaps: none")
+    for m in run.manoeuvres:
+        print("manoeuvre: " + ", ".join(f"{k} {v}" for k, v in m.items()))
+    return 0
