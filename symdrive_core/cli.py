@@ -21,6 +21,7 @@ COMMAND_MODULES = [
     "symdrive_core.optim.commands",
     "symdrive_core.diffusion.commands",
     "symdrive_core.traffic.commands",
+    "symdrive_core.insertion.commands",
     "symdrive_core.pipeline.commands",
 ]
 

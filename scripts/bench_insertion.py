@@ -1,0 +1,69 @@
+"""Insertion benchmark: the four methods on held-out placements, harmonization time per frame,
+fine-tune time, and harmonization quality against sampler steps.
+
+    python scripts/bench_insertion.py --package symdrive_core/data/demo_street \
+        --background out/recon/background.ply --steps 5 10 25 50 --out bench_insertion.json
+
+Needs the package's ``ground_truth.insertion`` (Cycles renders of the vehicle truly in the scene)
+and the built-in restorer. Rows follow REPORT.md's ``metrics.insertion``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--package", required=True, type=Path)
+    p.add_argument("--background", required=True, type=Path, help="background splat PLY (the reconstruction)")
+    p.add_argument("--steps", type=int, nargs="*", default=[5, 10, 25, 50], help="sampler steps to sweep")
+    p.add_argument("--main-steps", type=int, help="steps for the full four-method run (default: the restorer's)")
+    p.add_argument("--finetune-steps", type=int, default=300)
+    p.add_argument("--train-views", type=int, default=6)
+    p.add_argument("--features-module", help="extractor for the Frechet distance (FILE.py:FN, MODULE:FN, .pt)")
+    p.add_argument("--out", type=Path, default=Path("bench_insertion.json"))
+    args = p.parse_args(argv)
+
+    from symdrive_core.diffusion.models import load_restorer
+    from symdrive_core.insertion.evaluate import InsertionConfig, evaluate_insertion
+    from symdrive_core.insertion.features import load_extractor
+    from symdrive_core.insertion.harmonizer import restorer_harmonizer
+    from symdrive_core.io.atomic import write_text_atomic
+    from symdrive_core.io.ply import read_splats
+    from symdrive_core.optim.finetune import FinetuneConfig
+    from symdrive_core.scene import load_manifest
+
+    manifest = load_manifest(args.package)
+    background = read_splats(args.background, drop_invalid=True)
+    restorer = load_restorer()
+    extractor = load_extractor(args.features_module) if args.features_module else None
+    result: dict = {"package": str(args.package), "sweep": []}
+
+    details: dict = {}
+    t0 = time.perf_counter()
+    cfg = InsertionConfig(train_views=args.train_views, finetune=FinetuneConfig(steps=args.finetune_steps))
+    result["insertion"] = evaluate_insertion(manifest, background, harmonizer=restorer_harmonizer(
+        restorer, steps=args.main_steps), config=cfg, extractor=extractor, details=details)
+    result["seconds"] = round(time.perf_counter() - t0, 2)
+    result["details"] = details
+    for steps in args.steps:  # harmonization only: no training views, no fine-tune
+        d: dict = {}
+        rows = evaluate_insertion(manifest, background, harmonizer=restorer_harmonizer(restorer, steps=steps),
+                                  config=InsertionConfig(train_views=0), details=d, progress=False)
+        harm = next(r for r in rows if r["method"] == "harmonized")
+        secs = d["timings"]["harmonize_seconds"]
+        result["sweep"].append({"steps": steps, **{k: harm[k] for k in ("masked_psnr", "masked_ssim", "psnr")},
+                                "seconds_per_frame": round(sum(secs) / len(secs), 3)})
+        print(json.dumps(result["sweep"][-1]))
+    write_text_atomic(args.out, json.dumps(result, indent=1) + "\n")
+    print(json.dumps(result["insertion"], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,41 @@
+import argparse
+import json
+
+import numpy as np
+
+from symdrive_core.insertion import commands
+from symdrive_core.io.images import read_image, read_mask
+
+from . import package
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser()
+    commands.add_commands(parser.add_subparsers(dest="command"))
+    return parser.parse_args(argv)
+
+
+def test_insert_writes_frames_masks_and_regions(tmp_path):
+    path, _ = package.write_package(tmp_path / "pkg")
+    out = tmp_path / "out"
+    args = _parse(["insert", str(path), "--actor", "insert_0", "--background", str(path.parent / "background.ply"),
+                   "--out", str(out)])
+    assert args.func(args) == 0
+    frame = out / "front" / f"{package.HELD:06d}"
+    rgb = read_image(frame.with_suffix(".png"), channels=3)
+    mask = read_mask(frame.with_suffix(".mask.png"))
+    region = read_mask(frame.with_suffix(".region.png"))
+    truth_mask = read_mask(path.parent / "gt/mask.png") > 0.5
+    assert rgb.shape == (package.H, package.W, 3)
+    assert ((mask > 0.5) == truth_mask).mean() > 0.98  # the same car in the same place
+    assert np.all(region[mask > 0.5] > 0.5)
+    assert len(list((out / "front").glob("*.mask.png"))) == 1  # the actor exists in one frame only
+
+
+def test_insert_eval_baselines_to_json(tmp_path, capsys):
+    path, _ = package.write_package(tmp_path / "pkg")
+    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"), "--no-harmonize",
+                   "--json", str(tmp_path / "rows.json")])
+    assert args.func(args) == 0
+    rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
+    assert [r["method"] for r in rows] == ["naive", "color_transfer"]
