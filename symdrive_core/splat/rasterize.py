@@ -1,0 +1,283 @@
+"""Public rasterizer: ``rasterize(...)`` with a hand-written tile-based backward pass.
+
+The split follows gsplat: projection and SH evaluation are vectorised torch (autograd gives their
+gradients); the expensive per-pixel compositing is a ``torch.autograd.Function`` whose forward and
+backward are the numba tile kernels of :mod:`symdrive_core.splat.kernels`.
+
+Backends: ``"numba"`` (CPU kernels), ``"torch"`` (the vectorised reference of
+:mod:`symdrive_core.splat.reference`, differentiable by autograd), ``"gsplat"`` (gsplat's CUDA
+``rasterization``; only for CUDA tensors) and ``"auto"`` (gsplat when the tensors are on CUDA and
+gsplat imports, else numba).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import torch
+
+from . import kernels
+from .projection import camera_center, project_gaussians
+from .sh import sh_to_color
+
+TILE_SIZE = kernels.TILE
+
+
+@dataclass
+class TileBins:
+    offsets: np.ndarray  # [n_tiles + 1] int64
+    ids: np.ndarray  # [n_isect] int32, indices into the visible Gaussians, front to back per tile
+    tiles_x: int
+    tiles_y: int
+    tile_size: int = TILE_SIZE
+
+    @property
+    def n_isect(self) -> int:
+        return int(self.offsets[-1])
+
+
+def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
+                  tile_size: int = TILE_SIZE) -> TileBins:
+    """Tile lists for (visible) Gaussians, each list sorted by depth (ties: lower index first)."""
+    tiles_x = (width + tile_size - 1) // tile_size
+    tiles_y = (height + tile_size - 1) // tile_size
+    m2d = np.ascontiguousarray(means2d.detach().cpu().numpy().astype(np.float64, copy=False))
+    rad = np.ascontiguousarray(radii.detach().cpu().numpy().astype(np.int64, copy=False))
+    if m2d.shape[0] == 0:
+        return TileBins(np.zeros(tiles_x * tiles_y + 1, np.int64), np.zeros(0, np.int32), tiles_x, tiles_y,
+                        tile_size)
+    order = np.argsort(depths.detach().cpu().numpy(), kind="stable").astype(np.int64)
+    with _KernelScope():
+        rects = kernels.tile_rects(m2d, rad, tile_size, tiles_x, tiles_y)
+    offsets, ids = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+    return TileBins(offsets, ids, tiles_x, tiles_y, tile_size)
+
+
+class _KernelScope:
+    """Run numba parallel kernels without side effects on torch.
+
+    numba's OpenMP layer shares libgomp with torch and resets the process's OpenMP thread count when
+    it launches a region, which silently undoes a caller's ``torch.set_num_threads``; the count is
+    restored on exit. Tiles are handed out in small chunks (uneven tiles balance across cores).
+    """
+
+    def __enter__(self):
+        self.torch_threads = torch.get_num_threads()
+        self.chunk = numba.get_parallel_chunksize()
+        numba.set_parallel_chunksize(2)
+        return self
+
+    def __exit__(self, *exc):
+        numba.set_parallel_chunksize(self.chunk)
+        if torch.get_num_threads() != self.torch_threads:
+            torch.set_num_threads(self.torch_threads)
+        return False
+
+
+def _np(t: torch.Tensor) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().cpu().numpy())
+
+
+class RasterizePixels(torch.autograd.Function):
+    """2D Gaussians -> (features [H,W,C], alpha [H,W], instance [H,W,G]) with the numba kernels."""
+
+    @staticmethod
+    def forward(ctx, means2d, conics, opacities, colors, groups, n_groups, bins, width, height, threshold):
+        dtype = colors.dtype
+        C = colors.shape[1]
+        G = max(int(n_groups), 0)
+        np_dtype = np.float64 if dtype == torch.float64 else np.float32
+        out_color = np.zeros((height, width, C), np_dtype)
+        out_T = np.ones((height, width), np.float64)
+        out_inst = np.zeros((height, width, max(G, 1)), np_dtype)
+        out_last = np.zeros((height, width), np.int64)
+        grp = _np(groups.to(torch.int64)) if G > 0 else np.zeros(0, np.int64)
+        args = (_np(means2d), _np(conics), _np(opacities), _np(colors), grp, G, bins.offsets, bins.ids,
+                int(width), int(height), bins.tiles_x, bins.tile_size, float(threshold))
+        with _KernelScope():
+            kernels.rasterize_fwd(*args, out_color, out_T, out_inst, out_last)
+        ctx.args = args
+        ctx.outs = (out_color, out_T, out_inst, out_last)
+        ctx.shapes = (means2d.shape[0], C, G, dtype, means2d.device)
+        color = torch.from_numpy(out_color).to(means2d.device)
+        alpha = torch.from_numpy((1.0 - out_T).astype(np_dtype)).to(means2d.device)
+        inst = torch.from_numpy(out_inst[..., :G].copy()).to(means2d.device)
+        return color, alpha, inst
+
+    @staticmethod
+    def backward(ctx, g_color, g_alpha, g_inst):
+        m, C, G, dtype, device = ctx.shapes
+        args = ctx.args
+        out_color, out_T, out_inst, out_last = ctx.outs
+        H, W = out_T.shape
+        np_dtype = np.float64 if dtype == torch.float64 else np.float32
+
+        def grad_np(g, shape):
+            if g is None:
+                return np.zeros(shape, np_dtype)
+            return np.ascontiguousarray(g.detach().cpu().numpy().astype(np_dtype, copy=False))
+
+        gc = grad_np(g_color, (H, W, C))
+        ga = grad_np(g_alpha, (H, W))
+        gi = grad_np(g_inst, (H, W, G)) if G > 0 else np.zeros((H, W, 1), np_dtype)
+        n_isect = args[7].shape[0]
+        r_m2d = np.zeros((n_isect, 2), np_dtype)
+        r_conic = np.zeros((n_isect, 3), np_dtype)
+        r_opac = np.zeros(n_isect, np_dtype)
+        r_color = np.zeros((n_isect, C), np_dtype)
+        with _KernelScope():
+            kernels.rasterize_bwd(*args, out_color, out_T, out_inst, out_last, gc, ga, gi,
+                                  r_m2d, r_conic, r_opac, r_color)
+        g_m2d = np.zeros((m, 2), np.float64)
+        g_conic = np.zeros((m, 3), np.float64)
+        g_opac = np.zeros(m, np.float64)
+        g_col = np.zeros((m, C), np.float64)
+        kernels.reduce_rows(args[7], r_m2d, r_conic, r_opac, r_color, g_m2d, g_conic, g_opac, g_col)
+
+        def t(a):
+            return torch.from_numpy(a).to(device=device, dtype=dtype)
+
+        return t(g_m2d), t(g_conic), t(g_opac), t(g_col), None, None, None, None, None, None
+
+
+def resolve_backend(backend: str, device: torch.device) -> str:
+    if backend == "auto":
+        if device.type == "cuda":
+            try:
+                import gsplat  # noqa: F401
+                return "gsplat"
+            except ImportError:
+                pass
+        return "numba"
+    if backend not in ("numba", "torch", "gsplat"):
+        raise ValueError(f"backend must be auto, numba, torch or gsplat, got {backend!r}")
+    return backend
+
+
+def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height, *, background,
+                      sh_degree, near, far, eps2d, antialiased, render_depth, groups, n_groups):
+    """Adapter to gsplat's CUDA ``rasterization`` (same conventions; only for CUDA tensors).
+
+    Instance groups travel as extra one-hot colour channels (RGB only: SH colours are evaluated here
+    first when groups are asked for).
+    """
+    import gsplat
+
+    G = int(n_groups) if groups is not None else 0
+    if G > 0 and colors.dim() == 3:
+        cam = camera_center(viewmat).to(device=means.device, dtype=torch.float64)
+        deg = int(round(math.sqrt(colors.shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+        colors, sh_degree = sh_to_color(deg, colors, means.double() - cam).to(means.dtype), None
+    n_color = colors.shape[-1]
+    if G > 0:
+        onehot = torch.nn.functional.one_hot(groups.clamp_min(0), G).to(colors.dtype)
+        colors = torch.cat([colors, onehot * (groups >= 0)[:, None].to(colors.dtype)], -1)
+    render, alphas, meta = gsplat.rasterization(
+        means, quats, scales, opacities, colors, viewmat[None], K[None], width, height, near_plane=near,
+        far_plane=far, eps2d=eps2d, sh_degree=sh_degree if colors.dim() == 3 else None,
+        rasterize_mode="antialiased" if antialiased else "classic",
+        render_mode="RGB+ED" if render_depth else "RGB")
+    render, alpha = render[0], alphas[0]
+    rgb = render[..., :n_color]
+    if background is not None:
+        rgb = rgb + (1.0 - alpha) * torch.as_tensor(background, dtype=rgb.dtype, device=rgb.device)
+    info = {"radii": meta.get("radii"), "means2d": meta.get("means2d"), "depths": meta.get("depths"),
+            "n_isect": int(meta["isect_ids"].numel()) if "isect_ids" in meta else None, "backend": "gsplat",
+            "meta": meta, "width": width, "height": height}
+    if render_depth:
+        info["depth"] = render[..., -1:]
+    if G > 0:
+        info["instance"] = render[..., n_color:n_color + G]
+    return rgb, alpha, info
+
+
+def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int, *,
+              background=None, sh_degree: int | None = None, near: float = 0.01, far: float = 1e10,
+              eps2d: float = 0.3, antialiased: bool = False, render_depth: bool = False,
+              alpha_threshold: float = 1.0 / 255.0, extent="opacity", backend: str = "auto",
+              groups: torch.Tensor | None = None, n_groups: int = 0):
+    """Render activated Gaussians. Returns ``(rgb [H,W,C], alpha [H,W,1], info)``.
+
+    ``means [N,3]``, ``quats [N,4]`` wxyz (normalised here; zero -> identity), ``scales [N,3]``,
+    ``opacities [N]``, ``colors`` either ``[N,C]`` or SH ``[N,K,3]`` (degree ``sh_degree``, default
+    the largest that K allows; colour ``max(SH(normalize(mu - camera)) + 0.5, 0)``). ``viewmat``
+    world->camera 4x4 (OpenCV), ``K`` 3x3, pixel centres at +0.5. ``background [C]`` is composited
+    as ``rgb + (1 - alpha) * background``.
+
+    ``groups [N]`` (int, -1 for none) with ``n_groups > 0`` adds ``info["instance"] [H,W,n_groups]``:
+    per group the accumulated ``alpha_i T_i`` of its Gaussians (differentiable).
+
+    ``info``: ``radii [N,2]``, ``means2d [N,2]`` (in the graph: ``retain_grad()`` it for
+    densification statistics), ``depths [N]``, ``conics``, ``opacities`` (compensated),
+    ``visible [N]``, ``n_isect``, ``depth [H,W,1]`` (alpha-weighted expected camera z, 0 where
+    empty) when ``render_depth``, ``bins`` (tile lists), ``backend``.
+    """
+    if width <= 0 or height <= 0:
+        raise ValueError(f"image size must be positive, got {width}x{height}")
+    width, height = int(width), int(height)
+    n = means.shape[0]
+    device = means.device
+    backend = resolve_backend(backend, device)
+    if backend == "gsplat":
+        return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width, height,
+                                background=background, sh_degree=sh_degree, near=near, far=far, eps2d=eps2d,
+                                antialiased=antialiased, render_depth=render_depth, groups=groups,
+                                n_groups=n_groups)
+
+    is_sh = colors.dim() == 3
+    if is_sh:
+        k = colors.shape[1]
+        deg = int(round(math.sqrt(k))) - 1 if sh_degree is None else int(sh_degree)
+        if (deg + 1) ** 2 > k:
+            raise ValueError(f"sh_degree {deg} needs {(deg + 1) ** 2} coefficients, colors has {k}")
+    col_finite = torch.isfinite(colors.reshape(n, -1)).all(-1) if n else torch.ones(0, dtype=torch.bool)
+    proj = project_gaussians(means, quats, scales, opacities, viewmat, K, width, height, near=near, far=far,
+                             eps2d=eps2d, antialiased=antialiased, extent=extent,
+                             alpha_threshold=alpha_threshold, finite_mask=col_finite)
+    vis = torch.nonzero(proj.visible, as_tuple=False).squeeze(1)
+    if is_sh:
+        sh_v = colors[vis]
+        feats = sh_to_color(deg, sh_v, proj.rel_means[vis]).to(colors.dtype)
+    else:
+        feats = colors[vis]
+    n_color = feats.shape[1]
+    depths_v = proj.depths[vis]
+    if render_depth:
+        feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
+    dtype = means.dtype
+    feats = feats.to(dtype)
+    m2d = proj.means2d[vis]
+    conics = proj.conics[vis]
+    opac = proj.opacities[vis]
+    G = int(n_groups) if groups is not None else 0
+    grp = groups[vis] if G > 0 else torch.zeros(0, dtype=torch.int64, device=device)
+
+    bins = None
+    if backend == "numba":
+        bins = bin_gaussians(m2d, proj.radii[vis], depths_v, width, height)
+        n_isect = bins.n_isect
+        out, alpha, inst = RasterizePixels.apply(m2d, conics, opac, feats, grp, G, bins, width, height,
+                                                 alpha_threshold)
+    else:
+        from .reference import rasterize_pixels_torch
+        out, alpha, inst, n_isect = rasterize_pixels_torch(m2d, conics, opac, feats, grp, G, width, height,
+                                                           alpha_threshold, proj.radii[vis], depths_v)
+    alpha = alpha[..., None]
+    rgb = out[..., :n_color]
+    if background is not None:
+        bg = torch.as_tensor(background, dtype=rgb.dtype, device=rgb.device)
+        rgb = rgb + (1.0 - alpha) * bg
+    info = {"radii": proj.radii, "means2d": proj.means2d, "depths": proj.depths, "conics": proj.conics,
+            "opacities": proj.opacities, "visible": proj.visible, "n_isect": n_isect, "bins": bins,
+            "n_visible": int(vis.numel()), "backend": backend, "camera_center": proj.camera_center,
+            "width": width, "height": height}
+    if render_depth:
+        d = out[..., n_color:n_color + 1]
+        info["depth"] = torch.where(alpha > 0, d / torch.where(alpha > 0, alpha, torch.ones_like(alpha)),
+                                    torch.zeros_like(d))
+    if G > 0:
+        info["instance"] = inst
+    return rgb, alpha, info
