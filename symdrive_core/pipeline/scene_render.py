@@ -72,7 +72,7 @@ class SceneRenderer:
                                 torch.as_tensor(pose.R, dtype=torch.float32, device=self.device),
                                 torch.as_tensor(pose.translation, dtype=torch.float32, device=self.device),
                                 actor.instance_id))
-        out = render_layers(layers, torch.as_tensor(w2c, dtype=torch.float32, device=self.device),
+        out = render_layers(layers, torch.as_tensor(w2c, dtype=torch.float64, device=self.device),
                             torch.as_tensor(K, dtype=torch.float32, device=self.device), cam.width, cam.height,
                             background=self.background_color, antialiased=self.antialiased)
         by_instance = {a.instance_id: a.id for a in self.manifest.actors}

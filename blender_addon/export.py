@@ -1,0 +1,293 @@
+"""Export a Blender scene as a scene package: manifest.json (validated by the core) + masks.
+
+Every pose is evaluated with ``frame_set`` (animation, constraints and drivers applied) and
+expressed in the background splat object's frame. Cameras are written in OpenCV convention with
+a per-frame K from ``conventions.blender_intrinsics``. The package is written into a temporary
+sibling directory, re-read and checked by the core, and only then swapped in atomically.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from . import actors, camera_math, core, masks, reference_frame
+from .core import atomic, conventions, errors
+from .core import scene as scene_pkg
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass
+class ExportOptions:
+    out: Path
+    frame_start: int | None = None  # Blender frames, inclusive; None = the scene's range
+    frame_end: int | None = None
+    write_masks: bool = True
+    copy_assets: bool = False
+    name: str | None = None
+
+
+@dataclass
+class _Actor:
+    root: bpy.types.Object
+    splats: str | None  # absolute paths on this machine
+    mesh: str | None
+
+
+def _file_label(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "item"
+
+
+def export_cameras(scene) -> list[bpy.types.Object]:
+    cams = sorted(
+        (ob for ob in scene.objects if ob.type == "CAMERA" and ob.symdrive.export), key=lambda o: o.name
+    )
+    if not cams:
+        raise errors.InputError(
+            scene.name, "no camera to export (add a camera or tick its SymDrive Export box)"
+        )
+    for cam in cams:
+        if cam.data.type != "PERSP":
+            raise errors.InputError(
+                cam.name, f"camera type {cam.data.type} is not supported (use Perspective)", "type"
+            )
+    return cams
+
+
+def render_size(scene) -> tuple[int, int]:
+    pct = scene.render.resolution_percentage / 100.0
+    return max(1, round(scene.render.resolution_x * pct)), max(1, round(scene.render.resolution_y * pct))
+
+
+def camera_intrinsics(scene, cam_data, width: int, height: int) -> np.ndarray:
+    return conventions.blender_intrinsics(
+        width,
+        height,
+        cam_data.lens,
+        cam_data.sensor_width,
+        cam_data.sensor_height,
+        cam_data.sensor_fit,
+        cam_data.shift_x,
+        cam_data.shift_y,
+        scene.render.pixel_aspect_x,
+        scene.render.pixel_aspect_y,
+    )
+
+
+def _collect_actors(scene) -> list[_Actor]:
+    out = []
+    for root in actors.all_actors(scene):
+        s = root.symdrive
+        splat_obj = actors.splat_asset(root)
+        splats = bpy.path.abspath(splat_obj.symdrive.ply_path) if splat_obj else None
+        mesh = bpy.path.abspath(s.mesh_path) if s.mesh_path else None
+        if splats is None and mesh is None:
+            raise errors.InputError(root.name, "actor has neither a splat cloud nor a mesh file", "assets")
+        for path in (splats, mesh):
+            if path and not os.path.isfile(path):
+                raise errors.InputError(path, f"asset of actor {s.actor_id!r} not found", "assets")
+        out.append(_Actor(root, splats, mesh))
+    ids = [a.root.symdrive.instance_id for a in out]
+    if len(set(ids)) != len(ids) or min(ids, default=1) < 1:
+        raise errors.InputError(
+            scene.name, f"actor instance ids must be distinct and >= 1, got {ids}", "instance_id"
+        )
+    return out
+
+
+def _sun_direction(scene, bg_inv: Matrix) -> np.ndarray | None:
+    """Direction sunlight travels (the sun lamp's -Z) in the background frame, if the scene has a sun."""
+    for ob in scene.objects:
+        if ob.type == "LIGHT" and ob.data.type == "SUN" and not ob.hide_render:
+            d = (bg_inv.to_3x3() @ ob.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+            return np.array(d)
+    return None
+
+
+def _check_rigid(ob: bpy.types.Object, M: Matrix) -> None:
+    """Actors keep unit scale: the backend moves their PLY rigidly, so a scaled actor would not match."""
+    scale = np.array(M.to_scale())
+    if not np.allclose(scale, 1.0, atol=1e-4):
+        raise errors.InputError(
+            ob.name,
+            f"scaled by {tuple(np.round(scale, 4))}: vehicles must keep unit scale (poses are rigid)",
+            "scale",
+        )
+
+
+class _AssetPaths:
+    """Manifest paths for asset files: relative to the package, or copied into ``assets/``."""
+
+    def __init__(self, final_dir: Path, work_dir: Path, copy: bool):
+        self.final_dir, self.work_dir, self.copy, self.done = final_dir, work_dir, copy, {}
+
+    def __call__(self, path: str | None) -> str | None:
+        if path is None:
+            return None
+        if path not in self.done:
+            if self.copy:
+                target = self.work_dir / "assets" / f"{len(self.done):02d}_{Path(path).name}"
+                target.parent.mkdir(exist_ok=True)
+                shutil.copy2(path, target)
+                self.done[path] = target.relative_to(self.work_dir).as_posix()
+            else:
+                try:
+                    self.done[path] = Path(os.path.relpath(path, self.final_dir)).as_posix()
+                except ValueError:  # another drive: keep it absolute
+                    self.done[path] = Path(path).as_posix()
+        return self.done[path]
+
+
+def _frame_range(scene, options: ExportOptions) -> list[int]:
+    f0 = scene.frame_start if options.frame_start is None else options.frame_start
+    f1 = scene.frame_end if options.frame_end is None else options.frame_end
+    if f1 < f0:
+        raise errors.InputError(scene.name, f"frame range {f0}:{f1} is empty", "frames")
+    return list(range(f0, f1 + 1))
+
+
+def _package_dir(options: ExportOptions) -> Path:
+    out = Path(bpy.path.abspath(str(options.out))).resolve()
+    if out.exists() and not (out / "manifest.json").is_file() and any(out.iterdir()):
+        raise errors.InputError(out, "exists and is not a scene package; refusing to replace it")
+    return out
+
+
+def _camera_frame(scene, depsgraph, cam, bg_inv: Matrix, width: int, height: int) -> scene_pkg.CameraFrame:
+    """A camera's scale does not change what it sees: it is dropped, the rotation re-orthonormalised."""
+    ev = cam.evaluated_get(depsgraph)
+    c2w = conventions.blender_camera_to_opencv(reference_frame.rigid(bg_inv @ ev.matrix_world))
+    return scene_pkg.CameraFrame(
+        camera_intrinsics(scene, ev.data, width, height), c2w, conventions.invert_rigid(c2w)
+    )
+
+
+def _actor_pose(depsgraph, root, bg_inv: Matrix) -> scene_pkg.Pose | None:
+    """The asset frame's pose in the background frame; None while the actor is disabled in renders."""
+    ev = root.evaluated_get(depsgraph)
+    if ev.hide_render:
+        return None
+    _check_rigid(root, ev.matrix_world)
+    return scene_pkg.Pose.from_matrix(
+        reference_frame.rigid(bg_inv @ ev.matrix_world @ actors.asset_frame(root))
+    )
+
+
+def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progress | None = None):
+    """Write the package to ``options.out`` (replacing it atomically) and return the loaded manifest."""
+    frame_numbers = _frame_range(scene, options)
+    cameras = export_cameras(scene)
+    actor_list = _collect_actors(scene)
+    bg_inv = reference_frame.background_matrix(scene).inverted()
+    offsets = camera_math.parse_offsets(scene.symdrive.lateral_offsets)
+    width, height = render_size(scene)
+    out = _package_dir(options)
+
+    cam_frames = {cam: [] for cam in cameras}
+    poses = {a.root: [] for a in actor_list}
+    mask_entries, id_maps = [], []
+    renderer = (
+        masks.MaskRenderer(scene, [a.root for a in actor_list], width, height)
+        if options.write_masks and actor_list
+        else None
+    )
+    original_frame = scene.frame_current
+    try:
+        with atomic.atomic_directory(out) as work:
+            with renderer or contextlib.nullcontext():
+                for i, f in enumerate(frame_numbers):
+                    scene.frame_set(f)
+                    depsgraph = bpy.context.evaluated_depsgraph_get()
+                    for cam in cameras:
+                        cam_frames[cam].append(_camera_frame(scene, depsgraph, cam, bg_inv, width, height))
+                    for a in actor_list:
+                        poses[a.root].append(_actor_pose(depsgraph, a.root, bg_inv))
+                    present = [a.root for a in actor_list if poses[a.root][-1] is not None]
+                    if renderer and present:
+                        _write_masks(work, renderer, depsgraph, cameras, present, i, mask_entries, id_maps)
+                    if progress:
+                        progress(i + 1, len(frame_numbers))
+            asset = _AssetPaths(out, work, options.copy_assets)
+            inserted = any(a.root.symdrive.kind == "inserted" for a in actor_list)
+            sun = _sun_direction(scene, bg_inv)
+            fps = scene.render.fps / scene.render.fps_base
+            manifest = scene_pkg.Manifest(
+                name=options.name or scene.symdrive.package_name or scene.name,
+                frames=[
+                    scene_pkg.Frame(i, (f - frame_numbers[0]) / fps) for i, f in enumerate(frame_numbers)
+                ],
+                cameras=[scene_pkg.Camera(cam.name, width, height, cam_frames[cam]) for cam in cameras],
+                actors=[_manifest_actor(a, poses[a.root], asset) for a in actor_list],
+                background_splats=asset(_background_ply(scene)),
+                masks=mask_entries,
+                id_maps=id_maps,
+                effects=scene_pkg.Effects(
+                    lateral_offsets=offsets,
+                    harmonize=inserted and scene.symdrive.harmonize,
+                    finetune=inserted and scene.symdrive.finetune,
+                    shadows=sun is not None,
+                    sun_direction=sun,
+                ),
+            )
+            manifest.save(work / "manifest.json")
+            scene_pkg.check_files(scene_pkg.load_manifest(work / "manifest.json"))  # the core's own check
+    finally:
+        scene.frame_set(original_frame)
+    return scene_pkg.load_manifest(out / "manifest.json")
+
+
+def _manifest_actor(a: _Actor, poses, asset: _AssetPaths) -> scene_pkg.Actor:
+    s = a.root.symdrive
+    wlh = np.array(s.wlh) if min(s.wlh) > 0 else None
+    return scene_pkg.Actor(
+        id=s.actor_id,
+        kind=s.kind,
+        splats=asset(a.splats),
+        mesh=asset(a.mesh),
+        poses=poses,
+        wlh=wlh,
+        instance_id=s.instance_id,
+    )
+
+
+def _background_ply(scene) -> str | None:
+    bg = scene.symdrive.background
+    if bg is None or bg.name not in scene.objects or not bg.symdrive.ply_path:
+        return None
+    return bpy.path.abspath(bg.symdrive.ply_path)
+
+
+def _write_masks(work: Path, renderer, depsgraph, cameras, present, index, mask_entries, id_maps) -> None:
+    images = core.images()
+    for cam in cameras:
+        ids, amodal = renderer.render(depsgraph, cam, present)
+        folder = Path("masks") / _file_label(cam.name)
+        (work / folder).mkdir(parents=True, exist_ok=True)
+        id_path = (folder / f"{index:05d}_ids.png").as_posix()
+        images.write_id_map(work / id_path, ids)
+        id_maps.append(
+            scene_pkg.IdMap(
+                cam.name, index, id_path, {r.symdrive.instance_id: r.symdrive.actor_id for r in present}
+            )
+        )
+        for root in present:
+            stem = (folder / f"{index:05d}_{_file_label(root.symdrive.actor_id)}").as_posix()
+            images.write_mask(work / f"{stem}_amodal.png", amodal[root].astype(np.float32))
+            images.write_mask(
+                work / f"{stem}_visible.png", (ids == root.symdrive.instance_id).astype(np.float32)
+            )
+            mask_entries.append(
+                scene_pkg.MaskEntry(
+                    cam.name, index, root.symdrive.actor_id, f"{stem}_amodal.png", f"{stem}_visible.png"
+                )
+            )

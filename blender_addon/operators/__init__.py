@@ -1,0 +1,1 @@
+"""Operators: each module owns one user action."""

@@ -1,0 +1,74 @@
+"""Generate the built-in street world: a procedural street rendered by Cycles, as a scene package.
+
+Run with a Python that has the ``bpy`` wheel (the project venv does):
+
+    python scripts/make_world.py --out out/street --seed 0 [--overcast] [--frames 30]
+
+The package holds the training drive (images, z-depth, OpenCV cameras), the same frames
+shifted sideways by +/-0.5 .. 3 m, held-out vehicle insertions (with / without / mask /
+shadow mask), a coloured point cloud of the scene surfaces, and three vehicle assets in the
+3DRealCar layout. ``ground_truth`` in ``manifest.json`` indexes all of it (see
+``symdrive_core.world.package``). Same seed and settings give the same scene and cameras.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+LATERAL_OFFSETS = (-3.0, -2.0, -1.5, -1.0, -0.5, 0.5, 1.0, 1.5, 2.0, 3.0)
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", required=True, type=Path, help="package directory to write (replaced atomically)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--width", type=int, default=256)
+    p.add_argument("--height", type=int, default=144)
+    p.add_argument("--frames", type=int, default=30, help="training-drive frames")
+    p.add_argument("--spacing", type=float, default=1.0, help="metres between training frames")
+    p.add_argument("--samples", type=int, default=32, help="Cycles samples per pixel (denoised with OIDN)")
+    p.add_argument("--overcast", action="store_true", help="no sun: flat grey sky, no hard shadows")
+    p.add_argument("--lateral-every", type=int, default=2, help="render lateral offsets at every k-th frame")
+    p.add_argument("--offsets", type=float, nargs="*", default=list(LATERAL_OFFSETS))
+    p.add_argument("--holdout-every", type=int, default=5, help="every k-th frame is held out of training")
+    p.add_argument("--placements", type=int, default=3, help="held-out vehicle insertions")
+    p.add_argument("--points", type=int, default=60000, help="points in the initial point cloud (at most)")
+    p.add_argument("--asset-splats", type=int, default=12000, help="splats per vehicle asset")
+    p.add_argument("--save-blend", action="store_true", help="also save world.blend in the package")
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv if argv is not None else _argv_after_dashes())
+    from tqdm import tqdm
+    from world.package import PackageWriter
+
+    from symdrive_core.io.atomic import atomic_directory
+
+    t0 = time.time()
+    with atomic_directory(args.out) as tmp:
+        writer = PackageWriter(tmp, args)
+        jobs = writer.plan()
+        with tqdm(total=len(jobs), desc="cycles", unit="render") as bar:
+            for job in jobs:
+                job()
+                bar.update()
+        writer.finish()
+    print(f"wrote {args.out} in {time.time() - t0:.0f} s "
+          f"({writer.seconds_per_render:.2f} s per Cycles render, {writer.renders} renders)")
+    return 0
+
+
+def _argv_after_dashes():
+    """``blender --background --python make_world.py -- ARGS`` passes ARGS after ``--``."""
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,209 @@
+"""Write the world's scene package: renders as jobs, then point cloud, assets and manifest.
+
+Layout (paths relative to the package):
+
+    manifest.json
+    gt/train/000000.png          training drive (also the images of camera "front")
+    gt/depth/000000.exr          OpenCV z-depth in metres, float; 0 where the ray meets the sky
+    gt/lateral/+0.5/000000.png   the frame's camera moved 0.5 m to its right (lateral_shift)
+    gt/insertion/00/with.png     vehicle placed in the scene (true light and shadow)
+    gt/insertion/00/mask.png     its visible mask (object-index pass, exact)
+    gt/insertion/00/shadow.png   its hard-shadow region (sunny scenes only)
+    background/points.ply        surface samples coloured from the training images
+    assets/<kind>/{mesh.obj, mesh.mtl, splats.ply, wlh.json}
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from symdrive_core import conventions
+from symdrive_core.io.images import write_image, write_mask
+from symdrive_core.scene import Actor, Camera, CameraFrame, Effects, Frame, Manifest, MaskEntry, Pose
+from symdrive_core.world.points import write_points
+from symdrive_core.world.projection import colour_points
+from symdrive_core.world.sampling import sample_surface
+
+from . import drive, render
+from .assets import export_car
+from .insertion import place_object, placement_pose, shadow_mask
+from .meshdata import scene_triangles
+from .street import LANE_WIDTH, LANES, build_street
+from .vehicles import ASSET_PAINTS, PRESETS, build_car
+
+SPEED = 10.0  # m/s of the ego car: timestamps = distance / speed
+INSERT_INDEX = 1  # object pass index of the inserted vehicle
+
+
+def lateral_dir(offset: float) -> str:
+    return f"{offset:+.1f}"
+
+
+class PackageWriter:
+    def __init__(self, root: Path, args):
+        self.root, self.args = Path(root), args
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        drive_end = (args.frames - 1) * args.spacing
+        self.street = build_street(args.seed, args.overcast, drive_end)
+        render.setup_cycles(args.width, args.height, args.samples, args.seed)
+        self.cam = render.make_camera()
+        self.K = render.camera_K(self.cam)
+        self.poses = drive.drive(self.street, args.frames, args.spacing)
+        self.heldout = list(range(args.holdout_every // 2, args.frames, args.holdout_every)) if args.holdout_every else []
+        self.train = [i for i in range(args.frames) if i not in self.heldout]
+        self.train_images: dict[int, np.ndarray] = {}
+        self.train_depths: dict[int, np.ndarray] = {}
+        self.lateral: dict[float, dict[str, str]] = {}
+        self.insertions: list[dict] = []
+        self.render_seconds: list[float] = []
+        self.assets = self._make_assets()
+
+    # ------------------------------------------------------------------ assets and renders
+    def _make_assets(self) -> dict:
+        col = bpy.data.collections.new("assets")
+        bpy.context.scene.collection.children.link(col)
+        out = {}
+        for k, (kind, paint) in enumerate(sorted(ASSET_PAINTS.items())):
+            obj = build_car(f"asset_{kind}", PRESETS[kind], paint, col)
+            obj["kind"] = kind
+            obj.pass_index = INSERT_INDEX
+            obj.hide_render = True
+            info = export_car(obj, self.root / "assets" / kind, self.args.asset_splats, self.args.seed + k)
+            out[kind] = (obj, info)
+        return out
+
+    def _render(self, c2w):
+        t = time.perf_counter()
+        out = render.render(self.cam, c2w)
+        self.render_seconds.append(time.perf_counter() - t)
+        return out
+
+    def plan(self) -> list:
+        """Every Cycles render as a job, training frames first (later jobs reuse their depth)."""
+        jobs = [lambda i=i: self._train(i) for i in range(self.args.frames)]
+        for off in self.args.offsets:
+            jobs += [lambda i=i, off=off: self._lateral(i, off) for i in range(0, self.args.frames, self.args.lateral_every)]
+        frames = self.heldout or list(range(self.args.frames))
+        kinds = sorted(self.assets)
+        jobs += [lambda k=k: self._insert(k, frames[k % len(frames)], kinds[k % len(kinds)])
+                 for k in range(self.args.placements)]
+        return jobs
+
+    def _train(self, i: int) -> None:
+        out = self._render(self.poses[i])
+        write_image(self.root / f"gt/train/{i:06d}.png", out["rgb"])
+        write_image(self.root / f"gt/depth/{i:06d}.exr", out["depth"], dtype="float")
+        self.train_images[i], self.train_depths[i] = out["rgb"], out["depth"]
+
+    def _lateral(self, i: int, offset: float) -> None:
+        out = self._render(conventions.lateral_shift(self.poses[i], offset))
+        rel = f"gt/lateral/{lateral_dir(offset)}/{i:06d}.png"
+        write_image(self.root / rel, out["rgb"])
+        self.lateral.setdefault(offset, {})[str(i)] = rel
+
+    def _insert(self, k: int, frame: int, kind: str) -> None:
+        obj, info = self.assets[kind]
+        cam_x = self.poses[frame][0, 3]
+        pose = placement_pose(self.street, cam_x, k, info["wlh"])
+        place_object(obj, pose)
+        obj.hide_render = False
+        try:
+            out = self._render(self.poses[frame])
+            mask = out["index"] == INSERT_INDEX
+            shadow = None
+            if self.street.sun_direction is not None:
+                shadow = shadow_mask(obj, self.poses[frame], self.K, self.train_depths[frame], mask,
+                                     self.street.sun_direction)
+        finally:
+            obj.hide_render = True
+        base = f"gt/insertion/{k:02d}"
+        write_image(self.root / f"{base}/with.png", out["rgb"])
+        write_mask(self.root / f"{base}/mask.png", mask)
+        if shadow is not None:
+            write_mask(self.root / f"{base}/shadow.png", shadow)
+        self.insertions.append({
+            "actor": f"insert_{k}", "asset": f"assets/{kind}", "kind": kind, "wlh": info["wlh"],
+            "pose": pose.to_json(), "camera": "front", "frame": frame,
+            "with": f"{base}/with.png", "without": f"gt/train/{frame:06d}.png",
+            "mask": f"{base}/mask.png", "shadow_mask": None if shadow is None else f"{base}/shadow.png",
+            "mask_pixels": int(mask.sum()), "shadow_pixels": 0 if shadow is None else int(shadow.sum()),
+        })
+
+    # ------------------------------------------------------------------ point cloud, manifest
+    def _point_cloud(self) -> str:
+        """Scene surfaces sampled (denser near the drive), kept where a training image sees them."""
+        rng = np.random.default_rng(self.args.seed)
+        verts, tris, _ = scene_triangles(self.street.background)
+        centres = verts[tris].mean(1)
+        path = np.array([p[:3, 3] for p in self.poses])
+        d = np.min(np.linalg.norm(centres[:, None, :2] - path[None, ::3, :2], axis=2), axis=1)
+        weights = 1.0 / (1.0 + (d / 15.0) ** 2)
+        pts, normals, _ = sample_surface(verts, tris, 6 * self.args.points, rng, weights)
+        views = [(self.K, conventions.invert_rigid(self.poses[i]), self.train_images[i], self.train_depths[i])
+                 for i in self.train]
+        colours, seen, _ = colour_points(pts, views)
+        idx = np.nonzero(seen)[0]
+        if len(idx) > self.args.points:
+            idx = np.sort(rng.choice(idx, self.args.points, replace=False))
+        write_points(self.root / "background/points.ply", pts[idx], colours[idx], normals[idx])
+        self.n_points = len(idx)
+        return "background/points.ply"
+
+    def _manifest(self, points: str) -> Manifest:
+        a = self.args
+        nf = a.frames
+        frames = [Frame(i, i * a.spacing / SPEED) for i in range(nf)]
+        cam_frames = [CameraFrame(self.K, c2w, conventions.invert_rigid(c2w), f"gt/train/{i:06d}.png",
+                                  f"gt/depth/{i:06d}.exr") for i, c2w in enumerate(self.poses)]
+        actors, masks = [], []
+        for k, ins in enumerate(self.insertions):
+            poses = [None] * nf
+            poses[ins["frame"]] = Pose(np.array(ins["pose"]["translation"]), np.array(ins["pose"]["rotation"]))
+            actors.append(Actor(ins["actor"], "inserted", f"{ins['asset']}/splats.ply", f"{ins['asset']}/mesh.obj",
+                                poses, np.array(ins["wlh"]), k + 1))
+            masks.append(MaskEntry("front", ins["frame"], ins["actor"], visible=ins["mask"]))
+        sunny = self.street.sun_direction is not None
+        ground_truth = {
+            "camera": "front",
+            "train_frames": self.train,
+            "heldout_frames": self.heldout,
+            "depth": "OpenCV z-depth in metres (float EXR); 0 where the ray meets the sky",
+            "lateral": [{"offset_m": float(off), "camera": "front",
+                         "frames": dict(sorted(self.lateral[off].items(), key=lambda kv: int(kv[0])))}
+                        for off in sorted(self.lateral)],
+            "insertion": self.insertions,
+            "road": {"centerline": np.round(self.street.centreline(), 4).tolist(), "lanes": LANES,
+                     "lane_width": LANE_WIDTH},
+            "generator": {
+                "script": "scripts/make_world.py", "seed": a.seed, "width": a.width, "height": a.height,
+                "frames": nf, "spacing_m": a.spacing, "samples": a.samples, "denoiser": "OpenImageDenoise",
+                "overcast": a.overcast, "lateral_every": a.lateral_every, "blender": bpy.app.version_string,
+                "seconds_per_render": round(self.seconds_per_render, 3), "renders": self.renders,
+                "points": self.n_points, "colour": "sRGB (Standard view transform, no look)",
+            },
+        }
+        return Manifest(
+            name=f"street-{a.seed}{'-overcast' if a.overcast else ''}", frames=frames,
+            cameras=[Camera("front", a.width, a.height, cam_frames)], actors=actors,
+            background_points=points, masks=masks,
+            effects=Effects(lateral_offsets=[float(o) for o in a.offsets], harmonize=bool(actors),
+                            finetune=bool(actors), shadows=sunny, sun_direction=self.street.sun_direction),
+            ground_truth=ground_truth, root=self.root)
+
+    @property
+    def renders(self) -> int:
+        return len(self.render_seconds)
+
+    @property
+    def seconds_per_render(self) -> float:
+        return float(np.mean(self.render_seconds)) if self.render_seconds else 0.0
+
+    def finish(self) -> None:
+        points = self._point_cloud()
+        self._manifest(points).save(self.root / "manifest.json")
+        if self.args.save_blend:
+            bpy.ops.wm.save_as_mainfile(filepath=str(self.root / "world.blend"))

@@ -1,0 +1,25 @@
+"""Symmetric dual-view diffusion restoration and RePaint harmonization.
+
+Modules: ``flow`` (schedule, Euler sampler, N_start initialisation), ``latent`` (pixel space /
+Flux VAE), ``unet`` (the built-in network), ``models`` (backends and ``load_restorer``),
+``flux`` (Flux.1-dev + LoRA), ``sampler`` (images in, image out), ``data`` (training pairs),
+``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS refinement
+on restored views), ``harmonize`` (RePaint), ``commands`` (CLI).
+
+Design of the built-in backend, which must train on a CPU in minutes and ship in a few MB:
+
+* **Pixel space at the package's resolution, not a latent.** The paper's VAE exists only as
+  multi-GB Flux weights we may not download, a small VAE trained here would cap PSNR at its
+  own reconstruction error, and at 256x144 the image is already as small as an SD latent of a
+  2 MP frame. The harmonization guarantee (background bit-identical) is also simplest in
+  pixels. Training uses random 64x64 crops (the network is fully convolutional), inference runs
+  on whole frames.
+* **Channel concatenation of ``[z_-d ; z_t ; z_d]``, not tokens.** The side views are a short
+  lateral step away, so corresponding content sits near the same pixels: a convolutional UNet
+  with nine input channels compares them locally for almost no extra cost, while in-context
+  tokens triple the sequence length of every attention layer. Flux, whose attention is global
+  anyway, gets the token layout (``flux``), as Kontext does.
+
+Nothing here downloads anything: the built-in weights ship in ``weights/``, and Flux loads only
+from files the user names.
+"""

@@ -1,0 +1,234 @@
+"""Restorer subcommands: ``make-pairs``, ``train-restorer`` and ``restore``.
+
+Registration imports nothing heavy: torch and diffusers load inside the handlers, so commands
+that need no diffusion model never pay for (or depend on) them.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError as exc:
+        raise SystemExit(f"expected comma-separated numbers, got {text!r}") from exc
+
+
+def _ints(text: str) -> list[int]:
+    return [int(v) for v in _floats(text)]
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser(
+        "make-pairs", help="render restorer training pairs (I_-d, I_d) -> I_0 from a reconstruction"
+    )
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument(
+        "--gaussians", type=Path, help="reconstruction PLY (default: the manifest's background splats)"
+    )
+    p.add_argument(
+        "--offsets", type=_floats, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
+    )
+    p.add_argument("--frames", type=_ints, help="recorded frames (default: the training frames)")
+    p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
+    p.set_defaults(func=_make_pairs)
+
+    p = sub.add_parser("train-restorer", help="train the built-in restorer on a pairs file (CPU)")
+    p.add_argument("pairs", type=Path, help="pairs file from `symdrive make-pairs`")
+    p.add_argument("--out", type=Path, required=True, help="folder for weights, record and checkpoint")
+    for flag, kind, text in (
+        ("--steps", int, "training steps (default 3000)"),
+        ("--batch", int, "crops per step (default 8)"),
+        ("--crop", int, "square crop size in pixels (default 64)"),
+        ("--lr", float, "peak learning rate (default 4e-4)"),
+        ("--ema", float, "EMA decay of the shipped weights (default 0.999)"),
+        ("--width", int, "UNet base width (default 24)"),
+        ("--seed", int, "seed of every batch and noise draw (default 0)"),
+        ("--threads", int, "torch threads (default 1)"),
+        ("--checkpoint-every", int, "steps between checkpoints (default 250)"),
+    ):
+        p.add_argument(flag, type=kind, help=text)
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.safetensors")
+    p.set_defaults(func=_train)
+
+    p = sub.add_parser("restore", help="restore lateral views auto-regressively (and evaluate / refine)")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument(
+        "--gaussians", type=Path, help="reconstruction PLY (default: the manifest's background splats)"
+    )
+    p.add_argument(
+        "--offsets",
+        type=_floats,
+        default=[0.5, 1.0, 1.5, 2.0, 3.0],
+        help="metres; each is restored on both sides",
+    )
+    p.add_argument("--step", type=float, default=0.5, help="chain step d in metres (0 = single-view)")
+    p.add_argument("--frames", type=_ints, help="recorded frames (default: all)")
+    p.add_argument("--steps", type=int, default=50, help="sampler steps")
+    p.add_argument("--n-start", type=int, default=10, help="start step of the noise initialisation")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument(
+        "--evaluate",
+        action="store_true",
+        help="score raw / single-view / ar_d0.5 / ar_d1.0 against the package's lateral ground truth",
+    )
+    p.add_argument(
+        "--refine", action="store_true", help="with --evaluate: refine the 3DGS on the restored views"
+    )
+    p.add_argument("--refine-iters", type=int, default=600)
+    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin")
+    p.add_argument("--weights", type=Path, help="built-in restorer weights (default: the shipped ones)")
+    p.add_argument("--flux-transformer", help="FLUX.1-dev transformer folder (diffusers layout)")
+    p.add_argument("--flux-vae", help="FLUX.1-dev VAE folder (diffusers layout)")
+    p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
+    p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
+    p.add_argument("--threads", type=int, default=1)
+    p.set_defaults(func=_restore)
+
+
+def _load_scene(args):
+    from ..errors import InputError
+    from ..io.ply import read_splats
+    from ..scene import load_manifest
+
+    manifest = load_manifest(args.package)
+    ply = args.gaussians or manifest.resolve(manifest.background_splats)
+    if ply is None:
+        raise InputError(
+            manifest.path or manifest.root,
+            "no reconstruction: pass --gaussians or run `symdrive reconstruct`",
+            "background.splats",
+        )
+    return manifest, read_splats(ply, drop_invalid=True)
+
+
+def _make_pairs(args) -> int:
+    from .data import make_pairs
+
+    manifest, gaussians = _load_scene(args)
+    out = make_pairs(manifest, gaussians, args.offsets, args.out, frames=args.frames)
+    print(f"wrote {out}")
+    return 0
+
+
+def _train(args) -> int:
+    from ..cli import print_json
+    from .train import TrainConfig, train_restorer
+
+    cfg = TrainConfig()
+    for name in ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every"):
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
+    command = " ".join(["symdrive", *sys.argv[1:]])
+    record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=command)
+    print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "data")})
+    return 0
+
+
+def _restore(args) -> int:
+    import json
+
+    import torch
+
+    from ..io.atomic import write_text_atomic
+    from .models import load_restorer
+    from .sampler import SamplerConfig
+
+    torch.set_num_threads(args.threads)
+    manifest, gaussians = _load_scene(args)
+    restorer = load_restorer(
+        args.backend,
+        args.weights,
+        **(
+            {
+                "transformer": args.flux_transformer,
+                "vae": args.flux_vae,
+                "lora": args.flux_lora,
+                "prompt": args.flux_prompt,
+            }
+            if args.backend == "flux"
+            else {}
+        ),
+    )
+    sampler = SamplerConfig(steps=args.steps, n_start=args.n_start, seed=args.seed)
+    if args.evaluate:
+        metrics = _evaluate(args, manifest, gaussians, restorer, sampler)
+        write_text_atomic(args.out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+        print(json.dumps(metrics["lateral"], indent=1))
+        return 0
+    index = _restore_frames(args, manifest, gaussians, restorer, sampler)
+    write_text_atomic(args.out / "restored.json", json.dumps(index, indent=1) + "\n")
+    print(f"wrote {len(index['views'])} restored views to {args.out}")
+    return 0
+
+
+def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
+    from tqdm import tqdm
+
+    from .. import conventions
+    from ..io.images import read_image, write_image
+    from .data import SplatRenderer
+    from .restore import Camera, LateralChain
+
+    cam = manifest.cameras[0]
+    frames = args.frames if args.frames is not None else list(range(len(cam.frames)))
+    render = SplatRenderer(gaussians)
+    offsets = sorted({s * abs(o) for o in args.offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
+    views = []
+    for fi in tqdm(frames, desc="restore", unit="frame"):
+        cf = cam.frames[fi]
+        chain = LateralChain(
+            restorer,
+            render,
+            read_image(manifest.resolve(cf.image), channels=3),
+            Camera(cf.K, cf.camera_to_world, cam.width, cam.height),
+            sampler,
+        )
+        for off in offsets:
+            rel = f"{off:+.2f}/{fi:06d}.png"
+            write_image(args.out / rel, chain.restore(off, args.step))
+            c2w = conventions.lateral_shift(cf.camera_to_world, off)
+            views.append(
+                {
+                    "frame": fi,
+                    "offset_m": off,
+                    "image": rel,
+                    "K": cf.K.tolist(),
+                    "camera_to_world": c2w.tolist(),
+                    "width": cam.width,
+                    "height": cam.height,
+                }
+            )
+    return {"camera": cam.name, "step_m": args.step, "sampler": vars(sampler), "views": views}
+
+
+def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
+    import time
+
+    from ..io.ply import write_splats
+    from .restore import run_lateral_restoration, score_gaussians
+
+    methods = ("single_view", "ar_d0.5", "ar_d1.0")
+    t0 = time.perf_counter()
+    result = run_lateral_restoration(
+        manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames
+    )
+    rows = score_gaussians(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
+    metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
+    if args.refine:
+        from .refine import RefineConfig, refine_gaussians
+
+        method = f"ar_d{args.step}"
+        if method not in result.views:
+            raise SystemExit(f"--refine uses the restored views of {method}: pass --step 0.5 or 1.0")
+        refined, stats = refine_gaussians(
+            manifest, gaussians, result.views[method], RefineConfig(iters=args.refine_iters)
+        )
+        write_splats(args.out / "refined.ply", refined)
+        metrics["refine"] = {**stats, "views_from": method}
+        metrics["lateral"] += score_gaussians(manifest, refined, "refined", args.frames)
+    return metrics

@@ -1,0 +1,104 @@
+"""Rectified-flow schedule and Euler sampler shared by every backend.
+
+Forward process ``z_t = (1 - t) x0 + t eps``; the network predicts the velocity
+``v = eps - x0``, so one Euler step from ``t`` to ``s < t`` is ``z_s = z_t + (s - t) v``.
+Inference may start part-way down the schedule (the paper's position-accurate initialisation):
+at step ``N_start`` of ``N`` the state is ``(1 - sigma) z_cond + sigma eps`` with
+``sigma = t[N_start]``, so the structure of ``z_cond`` survives while fine detail is re-drawn.
+Every random draw goes through an explicit ``torch.Generator``: same seed, same image.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import torch
+
+Velocity = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+"""``(z_t [B,...], t [B]) -> v [B,...]``: the conditions are bound in by the caller."""
+
+
+def noised(x0: torch.Tensor, eps: torch.Tensor, t) -> torch.Tensor:
+    """``(1 - t) x0 + t eps`` with ``t`` a number or a per-sample tensor [B]."""
+    t = _broadcast(t, x0)
+    return (1.0 - t) * x0 + t * eps
+
+
+def velocity_target(x0: torch.Tensor, eps: torch.Tensor) -> torch.Tensor:
+    return eps - x0
+
+
+def _broadcast(t, like: torch.Tensor) -> torch.Tensor | float:
+    if isinstance(t, torch.Tensor) and t.ndim == 1:
+        return t.reshape(-1, *([1] * (like.ndim - 1))).to(like.dtype)
+    return t
+
+
+def time_shift(t: torch.Tensor, mu: float) -> torch.Tensor:
+    """Flux's resolution-dependent shift ``e^mu / (e^mu + 1/t - 1)``; identity at ``mu = 0``."""
+    if mu == 0.0:
+        return t
+    out = torch.zeros_like(t)
+    pos = t > 0
+    out[pos] = math.exp(mu) / (math.exp(mu) + (1.0 / t[pos] - 1.0))
+    return out
+
+
+def timesteps(steps: int, mu: float = 0.0) -> torch.Tensor:
+    """``steps + 1`` noise levels from 1 down to 0 (float64 so long chains stay exact)."""
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    return time_shift(torch.linspace(1.0, 0.0, steps + 1, dtype=torch.float64), mu)
+
+
+def start_state(
+    z_cond: torch.Tensor, ts: torch.Tensor, n_start: int, generator: torch.Generator
+) -> torch.Tensor:
+    """The state at step ``n_start``: ``(1 - sigma) z_cond + sigma eps`` (pure noise at 0)."""
+    if not 0 <= n_start < len(ts) - 1:
+        raise ValueError(f"n_start must lie in [0, {len(ts) - 2}] for {len(ts) - 1} steps, got {n_start}")
+    eps = torch.randn(z_cond.shape, generator=generator, dtype=z_cond.dtype)
+    return noised(z_cond, eps, float(ts[n_start]))
+
+
+def euler(
+    velocity: Velocity,
+    z: torch.Tensor,
+    ts: torch.Tensor,
+    *,
+    start: int = 0,
+    after_step: Callable[[torch.Tensor, int], torch.Tensor] | None = None,
+    progress: bool = False,
+) -> torch.Tensor:
+    """Integrate from ``ts[start]`` to ``ts[-1]``; ``after_step(z, i)`` may edit the state at ``ts[i]``
+    (RePaint's known-region reset)."""
+    from tqdm import tqdm
+
+    batch = z.shape[0]
+    for i in tqdm(range(start, len(ts) - 1), desc="sample", unit="step", disable=not progress, leave=False):
+        t, s = float(ts[i]), float(ts[i + 1])
+        v = velocity(z, torch.full((batch,), t, dtype=z.dtype))
+        z = z + (s - t) * v
+        if after_step is not None:
+            z = after_step(z, i + 1)
+    return z
+
+
+def flow_loss(velocity: Velocity, x0: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """Mean squared velocity error at uniformly drawn ``t`` (the paper's training objective)."""
+    t = torch.rand(x0.shape[0], generator=generator, dtype=x0.dtype)
+    eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype)
+    v = velocity(noised(x0, eps, t), t)
+    return torch.mean((v - velocity_target(x0, eps)) ** 2)
+
+
+def renoise(z_t: torch.Tensor, t: float, t_up: float, generator: torch.Generator) -> torch.Tensor:
+    """Go back up from level ``t`` to ``t_up > t`` keeping the marginals exact:
+    ``z' = a z_t + sqrt(t_up^2 - (a t)^2) eps'`` with ``a = (1 - t_up) / (1 - t)``."""
+    if not 0.0 <= t < t_up <= 1.0:
+        raise ValueError(f"renoise needs 0 <= t < t_up <= 1, got t={t}, t_up={t_up}")
+    a = (1.0 - t_up) / (1.0 - t)
+    b = math.sqrt(max(t_up**2 - (a * t) ** 2, 0.0))
+    eps = torch.randn(z_t.shape, generator=generator, dtype=z_t.dtype)
+    return a * z_t + b * eps

@@ -1,0 +1,90 @@
+"""Restorer backends behind one interface, and the loader that picks one.
+
+A restorer predicts the flow velocity of the centre view from its two side views:
+``velocity(z_t, t, cond_left, cond_right)`` on latents [B, C, h, w], with ``latent`` mapping
+images to that space and ``time_shift(latent_shape)`` the schedule's shift ``mu``.
+Two implementations:
+
+* ``BuiltinRestorer`` (default): the small pixel-space UNet whose trained weights ship with the
+  package, so restoration and harmonization run offline on a CPU.
+* ``FluxRestorer`` (:mod:`.flux`): Flux.1-dev + LoRA from local files, when the user has them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import torch
+
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from .latent import PixelSpace
+from .unet import UNet, UNetConfig
+
+DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "restorer.safetensors"
+
+
+class BuiltinRestorer:
+    """The shipped UNet in pixel space (no time shift)."""
+
+    def __init__(self, net: UNet):
+        self.net = net
+        self.latent = PixelSpace()
+
+    def time_shift(self, latent_shape) -> float:
+        return 0.0
+
+    def velocity(self, z_t, t, cond_left, cond_right) -> torch.Tensor:
+        return self.net(z_t, t, cond_left, cond_right)
+
+    def parameters(self):
+        return self.net.parameters()
+
+    def train(self, mode: bool = True) -> BuiltinRestorer:
+        self.net.train(mode)
+        return self
+
+
+def save_builtin(path: str | os.PathLike, net: UNet, meta: dict | None = None, *, half: bool = False) -> Path:
+    """Weights + config (in the safetensors metadata), written atomically."""
+    from safetensors.torch import save_file
+
+    dtype = torch.float16 if half else torch.float32
+    tensors = {k: v.detach().to(dtype).contiguous() for k, v in net.state_dict().items()}
+    metadata = {"config": json.dumps(net.config.to_json()), "meta": json.dumps(meta or {})}
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp), metadata=metadata)
+    return path
+
+
+def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
+    from safetensors import safe_open
+
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "restorer weights not found (train them with `symdrive train-restorer`)")
+    with safe_open(str(path), "pt") as f:
+        meta = f.metadata() or {}
+        if "config" not in meta:
+            raise InputError(path, "not a restorer checkpoint: no config in its metadata")
+        net = UNet(UNetConfig.from_json(json.loads(meta["config"])))
+        state = {k: f.get_tensor(k).float() for k in f.keys()}  # noqa: SIM118 (not a dict)
+    try:
+        net.load_state_dict(state)
+    except RuntimeError as exc:
+        raise InputError(path, f"weights do not match their config: {exc}") from exc
+    return BuiltinRestorer(net.eval())
+
+
+def load_restorer(backend: str = "builtin", weights: str | os.PathLike | None = None, **flux_files):
+    """``builtin`` (``weights`` or the shipped file) or ``flux`` (see :func:`.flux.load_flux`)."""
+    if backend == "builtin":
+        return load_builtin(weights or DEFAULT_WEIGHTS)
+    if backend == "flux":
+        from .flux import load_flux
+
+        return load_flux(**flux_files)
+    raise ValueError(f"unknown restorer backend {backend!r} (expected 'builtin' or 'flux')")

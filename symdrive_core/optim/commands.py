@@ -1,0 +1,54 @@
+"""``symdrive reconstruct``: fit background Gaussians to a scene package's training drive."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser("reconstruct", help="3DGS reconstruction of a scene package's background (CPU)")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default PACKAGE/reconstruction)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint if present")
+    p.add_argument("--sh-degree", type=int, default=None, help="SH degree of the result (default 1)")
+    p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight (default 0: off)")
+    p.add_argument("--max-gaussians", type=int, default=None, help="cap for densification (default 200000)")
+    p.add_argument("--max-init-points", type=int, default=None, help="point-cloud subset to start from (default 30000)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
+    p.add_argument("--no-link", action="store_true",
+                   help="do not point the manifest's background.splats at the result")
+    p.set_defaults(func=_reconstruct)
+
+
+def _reconstruct(args) -> int:
+    import json
+
+    from ..scene import load_manifest
+    from .reconstruct import ReconstructConfig, reconstruct
+
+    manifest = load_manifest(args.package)
+    cfg = ReconstructConfig(seed=args.seed)
+    for name in ("iters", "sh_degree", "depth_weight", "max_init_points"):
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
+    if args.max_gaussians is not None:
+        cfg.densify.max_gaussians = args.max_gaussians
+    out = args.out or manifest.root / "reconstruction"
+    result = reconstruct(manifest, out, cfg, resume=args.resume)
+    metrics = result.metrics
+    if args.lateral:
+        from ..io.atomic import write_text_atomic
+        from .evaluate import evaluate_lateral
+
+        metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
+        write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+    ply = (Path(out) / "background.ply").resolve()
+    if not args.no_link and ply.is_relative_to(manifest.root.resolve()):
+        manifest.background_splats = ply.relative_to(manifest.root.resolve()).as_posix()
+        manifest.save()
+    summary = {k: metrics[k] for k in ("gaussians", "seconds", "seconds_per_iteration", "heldout", "lateral")
+               if k in metrics}
+    print(json.dumps(summary, indent=1))
+    return 0

@@ -1,0 +1,350 @@
+"""3DGS reconstruction of a scene package's background from its training drive, on the CPU.
+
+Kerbl et al.'s recipe at small scale: Gaussians initialised from the package's coloured point
+cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can explain them),
+trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the package's depth
+maps), Adam with per-parameter learning rates and an exponentially decaying position rate,
+SH degree raised step by step, clone/split/prune density control. Every k-th frame of the
+drive is held out for evaluation. Checkpoints are a splat PLY plus the optimizer state in
+safetensors, so ``--resume`` continues exactly where a run stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..errors import InputError
+from ..gaussians import Gaussians, rgb_to_sh_dc, sh_coeff_count
+from ..io.atomic import atomic_path, write_text_atomic
+from ..io.images import read_image
+from ..io.ply import read_splats, write_splats
+from ..scene import Manifest
+from ..world.package import split_frames
+from ..world.points import read_points
+from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
+from .losses import photometric
+
+SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
+
+
+@dataclass
+class ReconstructConfig:
+    iters: int = 3000
+    sh_degree: int = 1
+    sh_every: int = 1000  # raise the active SH degree every this many iterations
+    lr_means: float = 1.6e-4  # times the scene extent; decays exponentially to lr_means_final
+    lr_means_final: float = 1.6e-6
+    lr_sh0: float = 2.5e-3
+    lr_shN: float = 2.5e-3 / 20
+    lr_opacity: float = 5e-2
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    ssim_lambda: float = 0.2
+    depth_weight: float = 0.0  # inverse-depth L1 against the package's depth maps (0 = off)
+    init_opacity: float = 0.3
+    sky_points: int = 4000
+    max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
+    densify_from: int = 300
+    densify_until_fraction: float = 0.6
+    densify_every: int = 100
+    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    holdout_every: int = 5  # used when the package does not name its held-out frames
+    checkpoint_every: int = 500
+    seed: int = 0
+
+
+@dataclass
+class View:
+    frame: int
+    K: torch.Tensor  # [3,3] float32
+    viewmat: torch.Tensor  # [4,4] world-to-camera
+    image: torch.Tensor  # [H,W,3]
+    depth: torch.Tensor | None  # [H,W], 0 = sky / unknown
+    width: int
+    height: int
+
+
+def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:
+    cam = manifest.camera(camera) if camera else manifest.cameras[0]
+    views = []
+    for i in frames:
+        cf = cam.frames[i]
+        if cf.image is None:
+            raise InputError(manifest.path or manifest.root, "frame has no image to train on",
+                             f"cameras.{cam.name}.frames[{i}].image")
+        img = read_image(manifest.resolve(cf.image), channels=3)
+        d = None
+        if depth and cf.depth is not None:
+            d = torch.from_numpy(read_image(manifest.resolve(cf.depth))[:, :, 0].copy())
+        views.append(View(i, torch.tensor(cf.K, dtype=torch.float32),
+                          torch.tensor(cf.world_to_camera, dtype=torch.float32),
+                          torch.from_numpy(img), d, cam.width, cam.height))
+    return views
+
+
+# ------------------------------------------------------------------ parameters
+
+
+def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Parameter]:
+    k = sh_coeff_count(sh_degree)
+    sh = np.zeros((len(g), k, 3), np.float32)
+    m = min(k, g.sh.shape[1])
+    sh[:, :m] = g.sh[:, :m]
+    p = {"means": g.means, "quats": g.quats, "log_scales": g.log_scales,
+         "opacity_logits": g.opacity_logits, "sh0": sh[:, :1]}
+    if k > 1:
+        p["shN"] = sh[:, 1:]
+    return {n: torch.nn.Parameter(torch.tensor(np.ascontiguousarray(v), dtype=torch.float32)) for n, v in p.items()}
+
+
+def gaussians_from_params(params: dict[str, torch.Tensor]) -> Gaussians:
+    sh = params["sh0"]
+    if "shN" in params:
+        sh = torch.cat([sh, params["shN"]], 1)
+    t = {n: v.detach().cpu().numpy() for n, v in params.items()}
+    return Gaussians(means=t["means"], quats=t["quats"], log_scales=t["log_scales"],
+                     opacity_logits=t["opacity_logits"], sh=sh.detach().cpu().numpy())
+
+
+def render(params: dict[str, torch.Tensor], view_K, viewmat, width: int, height: int,
+           sh_degree: int, render_depth: bool = False):
+    """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info)."""
+    from ..splat import rasterize
+
+    sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
+        [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
+    quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
+    return rasterize(params["means"], quats, params["log_scales"].exp(),
+                     torch.sigmoid(params["opacity_logits"]), sh, viewmat, view_K, width, height,
+                     sh_degree=sh_degree, render_depth=render_depth)
+
+
+def render_gaussians(g: Gaussians, K, world_to_camera, width: int, height: int) -> np.ndarray:
+    """Render stored Gaussians at one camera; sRGB-like [H,W,3] numpy in [0, 1]."""
+    params = params_from_gaussians(g, g.sh_degree)
+    with torch.no_grad():
+        rgb, _, _ = render(params, torch.tensor(K, dtype=torch.float32),
+                           torch.tensor(world_to_camera, dtype=torch.float32), width, height, g.sh_degree)
+    return rgb.clamp(0, 1).numpy()
+
+
+# ------------------------------------------------------------------ initialisation
+
+
+def scene_extent(views: list[View]) -> tuple[float, torch.Tensor]:
+    """(radius, centre) of the training cameras, 1.1x the farthest camera from their mean (3DGS)."""
+    centres = torch.stack([torch.linalg.inv(v.viewmat)[:3, 3] for v in views])
+    centre = centres.mean(0)
+    return max(1.1 * float((centres - centre).norm(dim=1).max()), 1.0), centre
+
+
+def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generator):
+    """Points on a sphere of ``radius`` around each camera, along its sky pixels (depth 0)."""
+    pts, cols = [], []
+    for v in views:
+        if v.depth is None:
+            continue
+        ys, xs = np.nonzero(v.depth.numpy() <= 0)
+        if len(ys) == 0:
+            continue
+        K = v.K.numpy().astype(np.float64)
+        rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        c2w = np.linalg.inv(v.viewmat.numpy().astype(np.float64))
+        pts.append(radius * rays @ c2w[:3, :3].T + c2w[:3, 3])
+        cols.append(v.image.numpy()[ys, xs])
+    if not pts:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
+    pts, cols = np.concatenate(pts), np.concatenate(cols)
+    idx = rng.choice(len(pts), min(n, len(pts)), replace=False)
+    return pts[idx].astype(np.float32), cols[idx].astype(np.float32)
+
+
+def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 2048) -> np.ndarray:
+    """Root mean squared distance to the k nearest neighbours (the 3DGS initial scale)."""
+    p = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
+    out = torch.empty(len(p))
+    for s in range(0, len(p), chunk):
+        d2 = torch.cdist(p[s:s + chunk], p).pow_(2)
+        vals = torch.topk(d2, min(k + 1, len(p)), largest=False).values[:, 1:]
+        out[s:s + chunk] = vals.mean(1).sqrt()
+    return out.clamp_min(1e-4).numpy()
+
+
+def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructConfig) -> Gaussians:
+    if manifest.background_points is None:
+        raise InputError(manifest.path or manifest.root, "no point cloud to initialise from", "background.points")
+    pts, cols = read_points(manifest.resolve(manifest.background_points))
+    rng = np.random.default_rng(cfg.seed)
+    if len(pts) > cfg.max_init_points:
+        keep = np.sort(rng.choice(len(pts), cfg.max_init_points, replace=False))
+        pts, cols = pts[keep], cols[keep]
+    extent, _ = scene_extent(views)
+    far = max(SKY_DISTANCE_FACTOR * extent, 150.0)
+    sp, sc = sky_points(views, cfg.sky_points, far, rng)
+    pts, cols = np.concatenate([pts, sp]), np.concatenate([cols, sc])
+    n = len(pts)
+    scale = knn_scale(pts)
+    return Gaussians(
+        means=pts.astype(np.float32),
+        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        log_scales=np.repeat(np.log(scale)[:, None], 3, 1).astype(np.float32),
+        opacity_logits=np.full(n, np.log(cfg.init_opacity / (1 - cfg.init_opacity)), np.float32),
+        sh=rgb_to_sh_dc(cols)[:, None, :].astype(np.float32),
+    )
+
+
+# ------------------------------------------------------------------ optimisation
+
+
+def make_optimizer(params, cfg: ReconstructConfig, extent: float) -> torch.optim.Adam:
+    lrs = {"means": cfg.lr_means * extent, "quats": cfg.lr_quats, "log_scales": cfg.lr_scales,
+           "opacity_logits": cfg.lr_opacity, "sh0": cfg.lr_sh0, "shN": cfg.lr_shN}
+    return torch.optim.Adam([{"params": [p], "lr": lrs[n], "name": n} for n, p in params.items()], eps=1e-15)
+
+
+def position_lr(cfg: ReconstructConfig, extent: float, it: int) -> float:
+    u = min(max(it / max(cfg.iters, 1), 0.0), 1.0)
+    return extent * cfg.lr_means * (cfg.lr_means_final / cfg.lr_means) ** u
+
+
+def depth_loss(info: dict, alpha: torch.Tensor, target: torch.Tensor | None) -> torch.Tensor | None:
+    """L1 between rendered and true inverse depth, where the truth has a surface and the
+    render is mostly opaque (the rasterizer's depth is alpha-normalised)."""
+    pred = info.get("depth")
+    if pred is None or target is None:
+        return None
+    pred = pred.reshape(target.shape)
+    valid = (target > 0) & (alpha.reshape(target.shape).detach() > 0.5)
+    if not valid.any():
+        return None
+    return (1.0 / pred[valid].clamp_min(1e-3) - 1.0 / target[valid]).abs().mean()
+
+
+@dataclass
+class Checkpoint:
+    """``gaussians.ply`` + ``state.safetensors`` (Adam moments, step counts, gradient stats)."""
+
+    folder: Path
+
+    def save(self, params, opt, stats: GradStats, it: int, cfg: ReconstructConfig) -> None:
+        from safetensors.torch import save_file
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        write_splats(self.folder / "gaussians.ply", gaussians_from_params(params))
+        tensors = {"stats.sum": stats.sum, "stats.count": stats.count}
+        for group in opt.param_groups:
+            st = opt.state.get(group["params"][0], {})
+            for key in ("exp_avg", "exp_avg_sq", "step"):
+                if key in st:
+                    tensors[f"adam.{group['name']}.{key}"] = st[key].reshape(-1) if key == "step" else st[key]
+        meta = {"iteration": str(it), "config": json.dumps(asdict(cfg))}
+        with atomic_path(self.folder / "state.safetensors") as tmp:
+            save_file({k: v.contiguous() for k, v in tensors.items()}, str(tmp), metadata=meta)
+
+    def exists(self) -> bool:
+        return (self.folder / "gaussians.ply").exists() and (self.folder / "state.safetensors").exists()
+
+    def load(self, cfg: ReconstructConfig, extent: float):
+        from safetensors import safe_open
+
+        g = read_splats(self.folder / "gaussians.ply")
+        params = params_from_gaussians(g, cfg.sh_degree)
+        opt = make_optimizer(params, cfg, extent)
+        with safe_open(str(self.folder / "state.safetensors"), "pt") as f:
+            it = int(f.metadata()["iteration"])
+            stats = GradStats(len(g))
+            stats.sum, stats.count = f.get_tensor("stats.sum"), f.get_tensor("stats.count")
+            keys = set(f.keys())
+            for group in opt.param_groups:
+                name = group["name"]
+                if f"adam.{name}.step" in keys:
+                    opt.state[group["params"][0]] = {
+                        "step": f.get_tensor(f"adam.{name}.step").reshape(()),
+                        "exp_avg": f.get_tensor(f"adam.{name}.exp_avg"),
+                        "exp_avg_sq": f.get_tensor(f"adam.{name}.exp_avg_sq")}
+        return params, opt, stats, it
+
+
+@dataclass
+class ReconstructResult:
+    gaussians: Gaussians
+    metrics: dict
+    output: Path
+
+
+def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
+                resume: bool = False, progress: bool = True) -> ReconstructResult:
+    """Fit background Gaussians to the training frames; write ``out/background.ply``,
+    ``out/checkpoint/`` and ``out/metrics.json`` (held-out PSNR/SSIM, timings)."""
+    from tqdm import tqdm
+
+    from .evaluate import evaluate_heldout
+
+    cfg = cfg or ReconstructConfig()
+    out = Path(out)
+    train_frames, heldout = split_frames(manifest, cfg.holdout_every)
+    views = load_views(manifest, train_frames, depth=True)
+    extent, centre = scene_extent(views)
+    ckpt = Checkpoint(out / "checkpoint")
+    torch.manual_seed(cfg.seed)
+    generator = torch.Generator().manual_seed(cfg.seed)
+    if resume and ckpt.exists():
+        params, opt, stats, start = ckpt.load(cfg, extent)
+    else:
+        params = params_from_gaussians(initial_gaussians(manifest, views, cfg), cfg.sh_degree)
+        opt = make_optimizer(params, cfg, extent)
+        stats, start = GradStats(len(params["means"])), 0
+    densify_until = int(cfg.densify_until_fraction * cfg.iters)
+    log = {"densify": []}
+    t0 = time.perf_counter()
+    bar = tqdm(range(start, cfg.iters), desc="reconstruct", unit="it", disable=not progress, initial=start,
+               total=cfg.iters)
+    for it in bar:
+        epoch, pos = divmod(it, len(views))
+        order = np.random.default_rng((cfg.seed, epoch)).permutation(len(views))
+        view = views[order[pos]]
+        for group in opt.param_groups:
+            if group["name"] == "means":
+                group["lr"] = position_lr(cfg, extent, it)
+        degree = min(cfg.sh_degree, it // cfg.sh_every)
+        rgb, alpha, info = render(params, view.K, view.viewmat, view.width, view.height, degree,
+                                  render_depth=cfg.depth_weight > 0)
+        loss = photometric(rgb, view.image, cfg.ssim_lambda)
+        if cfg.depth_weight > 0:
+            dl = depth_loss(info, alpha, view.depth)
+            if dl is not None:
+                loss = loss + cfg.depth_weight * dl
+        opt.zero_grad(set_to_none=True)
+        means2d = info["means2d"]
+        means2d.retain_grad()
+        loss.backward()
+        if it < densify_until and means2d.grad is not None:
+            stats.add(ndc_gradient_norm(means2d.grad, view.width, view.height), info["visible"])
+        opt.step()
+        step = it + 1
+        if cfg.densify_from <= step < densify_until and step % cfg.densify_every == 0:
+            log["densify"].append({"iteration": step, **densify_and_prune(
+                opt, params, stats, cfg.densify, extent, centre, generator)})
+        if step % 20 == 0:
+            bar.set_postfix(loss=f"{loss.item():.4f}", n=len(params["means"]))
+        if step % cfg.checkpoint_every == 0 or step == cfg.iters:
+            ckpt.save(params, opt, stats, step, cfg)
+    bar.close()
+    seconds = time.perf_counter() - t0
+    g = gaussians_from_params(params)
+    write_splats(out / "background.ply", g)
+    metrics = {"iterations": cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
+               "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
+               "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
+               "extent_m": round(extent, 3), "densify": log["densify"]}
+    if heldout:
+        metrics["heldout"] = evaluate_heldout(manifest, g, heldout)
+    write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+    return ReconstructResult(g, metrics, out)

@@ -1,0 +1,67 @@
+"""Readers for the ``ground_truth`` block that ``scripts/make_world.py`` writes.
+
+    ground_truth = {
+      "camera": "front",
+      "train_frames": [0, 1, 3, ...], "heldout_frames": [2, 7, ...],
+      "depth": "...",                       # how depth maps are stored
+      "lateral": [{"offset_m": 0.5, "camera": "front",
+                   "frames": {"0": "gt/lateral/+0.5/000000.png", ...}}, ...],
+      "insertion": [{"actor", "asset", "kind", "wlh", "pose": {"translation", "rotation"},
+                     "camera", "frame", "with", "without", "mask", "shadow_mask" (or null),
+                     "mask_pixels", "shadow_pixels"}, ...],
+      "road": {"centerline": [[x, y, z], ...], "lanes": 2, "lane_width": 3.5},
+      "generator": {...}                    # settings and Cycles timings
+    }
+
+A lateral ground-truth camera is the frame's camera moved ``offset_m`` along its own +x
+(``conventions.lateral_shift``; positive = right), same intrinsics and orientation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import conventions
+from ..scene import Manifest
+
+
+def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int], list[int]]:
+    """(training frames, held-out frames): the package's own split, else every k-th frame
+    (starting at k // 2) is held out."""
+    gt = manifest.ground_truth or {}
+    n = len(manifest.frames)
+    if "train_frames" in gt:
+        train = [int(i) for i in gt["train_frames"]]
+        heldout = [int(i) for i in gt.get("heldout_frames", [])]
+    else:
+        heldout = list(range(holdout_every // 2, n, holdout_every)) if holdout_every > 0 and n > 1 else []
+        train = [i for i in range(n) if i not in heldout]
+    return train, heldout
+
+
+@dataclass
+class LateralView:
+    offset_m: float
+    frame: int
+    K: np.ndarray
+    camera_to_world: np.ndarray
+    world_to_camera: np.ndarray
+    image: str  # ground truth, relative to the package
+    width: int
+    height: int
+
+
+def lateral_views(manifest: Manifest) -> list[LateralView]:
+    """Every lateral ground-truth image with its (shifted) camera, in offset then frame order."""
+    out = []
+    for entry in (manifest.ground_truth or {}).get("lateral", []):
+        cam = manifest.camera(entry.get("camera", manifest.cameras[0].name))
+        off = float(entry["offset_m"])
+        for key, rel in sorted(entry["frames"].items(), key=lambda kv: int(kv[0])):
+            cf = cam.frames[int(key)]
+            c2w = conventions.lateral_shift(cf.camera_to_world, off)
+            out.append(LateralView(off, int(key), cf.K, c2w, conventions.invert_rigid(c2w), rel,
+                                   cam.width, cam.height))
+    return out

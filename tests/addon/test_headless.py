@@ -1,0 +1,51 @@
+"""The real headless entry point, run as Blender runs it: a fresh process that opens the .blend
+and executes scripts/export_scene.py with the arguments after ``--`` (the bpy wheel stands in
+for ``blender --background file.blend --python scripts/export_scene.py -- ...``)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from symdrive_core.scene import check_files, load_manifest
+from tests.addon.scenes import two_car_scene
+
+pytestmark = pytest.mark.blender
+REPO = Path(__file__).resolve().parents[2]
+SCRIPT = REPO / "scripts" / "export_scene.py"
+
+
+def _run_blender(blend: Path, *args: str) -> subprocess.CompletedProcess:
+    code = (
+        "import bpy, runpy, sys\n"
+        f"bpy.ops.wm.open_mainfile(filepath={str(blend)!r})\n"
+        f"sys.argv = ['blender', '--background', {str(blend)!r}, '--python', {str(SCRIPT)!r},\n"
+        f"            '--', *{list(args)!r}]\n"
+        f"runpy.run_path({str(SCRIPT)!r}, run_name='__main__')\n"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=REPO, check=False
+    )
+
+
+def test_headless_export_of_a_saved_blend(blender, tmp_path):
+    two_car_scene(blender, tmp_path / "assets")
+    blend = tmp_path / "street.blend"
+    blender.ops.wm.save_as_mainfile(filepath=str(blend))
+    out = tmp_path / "package"
+    done = _run_blender(blend, "--out", str(out), "--frames", "2:4")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "frame 3/3" in done.stdout
+    m = load_manifest(out)
+    check_files(m)
+    assert len(m.frames) == 3 and [a.id for a in m.actors] == ["car_a", "car_b"]
+    assert len(m.masks) == 6 and all(a.poses[0] is not None for a in m.actors)
+
+    other = tmp_path / "not_a_package"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep")
+    failed = _run_blender(blend, "--out", str(other))
+    assert failed.returncode == 2
+    assert "not a scene package" in failed.stderr and "Traceback" not in failed.stderr
+    assert (other / "notes.txt").exists()

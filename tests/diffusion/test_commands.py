@@ -1,0 +1,119 @@
+import json
+import subprocess
+import sys
+
+from symdrive_core.cli import main
+from symdrive_core.io.ply import write_splats
+from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
+
+
+def test_registering_the_commands_loads_no_torch_or_diffusers():
+    code = (
+        "import sys, symdrive_core.diffusion.commands as c, argparse; "
+        "c.add_commands(argparse.ArgumentParser().add_subparsers()); "
+        "print(sorted(m for m in ('torch', 'diffusers', 'peft') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_package, tmp_path, capsys):  # noqa: F811
+    root, truth = synthetic_package
+    ply = tmp_path / "recon.ply"
+    write_splats(ply, truth)
+    pairs = tmp_path / "pairs.safetensors"
+    assert (
+        main(["make-pairs", str(root), "--gaussians", str(ply), "--offsets", "0.5,1", "--out", str(pairs)])
+        == 0
+    )
+    assert (
+        main(
+            [
+                "train-restorer",
+                str(pairs),
+                "--out",
+                str(tmp_path / "run"),
+                "--steps",
+                "3",
+                "--width",
+                "8",
+                "--crop",
+                "16",
+                "--batch",
+                "2",
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
+    weights = tmp_path / "run" / "restorer.safetensors"
+    record = json.loads((tmp_path / "run" / "restorer.json").read_text())
+    assert record["command"].startswith("symdrive ") and record["steps"] == 3
+
+    common = [
+        "--gaussians",
+        str(ply),
+        "--weights",
+        str(weights),
+        "--steps",
+        "2",
+        "--n-start",
+        "1",
+        "--threads",
+        "1",
+    ]
+    out = tmp_path / "eval"
+    assert (
+        main(
+            [
+                "restore",
+                str(root),
+                *common,
+                "--out",
+                str(out),
+                "--evaluate",
+                "--refine",
+                "--refine-iters",
+                "2",
+            ]
+        )
+        == 0
+    )
+    rows = json.loads((out / "metrics.json").read_text())["lateral"]
+    assert {(r["offset_m"], r["method"]) for r in rows} == {
+        (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "refined")
+    }
+    assert all(r["frames"] == 3 and 0 < r["ssim"] <= 1 for r in rows)
+    assert (out / "refined.ply").exists()
+
+    out = tmp_path / "views"
+    assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4"]) == 0
+    index = json.loads((out / "restored.json").read_text())
+    assert [(v["frame"], v["offset_m"]) for v in index["views"]] == [(0, -1.0), (0, 1.0), (4, -1.0), (4, 1.0)]
+    assert all((out / v["image"]).exists() for v in index["views"])
+
+
+def test_flux_backend_without_files_fails_with_the_list(synthetic_package, tmp_path, capsys):  # noqa: F811
+    root, truth = synthetic_package
+    ply = tmp_path / "recon.ply"
+    write_splats(ply, truth)
+    assert (
+        main(
+            [
+                "restore",
+                str(root),
+                "--gaussians",
+                str(ply),
+                "--out",
+                str(tmp_path / "o"),
+                "--backend",
+                "flux",
+                "--flux-vae",
+                str(tmp_path / "vae"),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "not given: transformer, lora, prompt" in err

@@ -1,0 +1,81 @@
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from symdrive_core.diffusion import flow
+from symdrive_core.diffusion.sampler import SamplerConfig, restore_image
+
+from .helpers import OracleRestorer, tiny_builtin
+
+
+def test_timesteps_run_from_one_to_zero_and_shift_keeps_the_ends():
+    for mu in (0.0, 1.15):
+        ts = flow.timesteps(7, mu)
+        assert len(ts) == 8 and ts[0] == 1.0 and ts[-1] == 0.0
+        assert bool(torch.all(ts[1:] < ts[:-1]))
+    assert bool(torch.all(flow.timesteps(7, 1.15)[1:-1] > flow.timesteps(7)[1:-1]))  # more time at high noise
+
+
+@pytest.mark.parametrize("steps,n_start", [(1, 0), (4, 0), (50, 10), (50, 49)])
+def test_euler_with_the_exact_velocity_lands_on_the_data(steps, n_start):
+    g = torch.Generator().manual_seed(1)
+    y = torch.rand(1, 3, 8, 12, generator=g)
+    init = torch.rand(1, 3, 8, 12, generator=g)
+    oracle = OracleRestorer(y)
+    out = restore_image(oracle, init, init, init, SamplerConfig(steps=steps, n_start=n_start))
+    assert torch.allclose(out, y, atol=1e-5)
+    assert len(oracle.calls) == steps - n_start
+
+
+def test_start_state_has_the_paper_statistics():
+    ts = flow.timesteps(50)
+    z_cond = torch.full((1, 1, 400, 400), 0.7)
+    z = flow.start_state(z_cond, ts, 10, torch.Generator().manual_seed(0))
+    sigma = float(ts[10])
+    assert sigma == pytest.approx(0.8)
+    assert float(z.mean()) == pytest.approx((1 - sigma) * 0.7, abs=0.01)
+    assert float(z.std()) == pytest.approx(sigma, rel=0.02)
+    assert torch.equal(
+        flow.start_state(z_cond, ts, 0, torch.Generator().manual_seed(3)),
+        torch.randn(z_cond.shape, generator=torch.Generator().manual_seed(3)),
+    )
+    with pytest.raises(ValueError, match="n_start"):
+        flow.start_state(z_cond, ts, 50, torch.Generator())
+
+
+@settings(max_examples=25, deadline=None)
+@given(t=st.floats(0.0, 0.9), dt=st.floats(0.02, 1.0), x0=st.floats(-1.0, 1.0))
+def test_renoise_keeps_the_flow_marginals(t, dt, x0):
+    t_up = min(1.0, t + dt)
+    g = torch.Generator().manual_seed(0)
+    n = 200_000
+    z_t = flow.noised(torch.full((n,), x0), torch.randn(n, generator=g), t)
+    z_up = flow.renoise(z_t, t, t_up, g)
+    assert float(z_up.mean()) == pytest.approx((1 - t_up) * x0, abs=0.01)
+    assert float(z_up.std()) == pytest.approx(t_up, abs=0.01)
+
+
+def test_renoise_rejects_going_down():
+    with pytest.raises(ValueError):
+        flow.renoise(torch.zeros(3), 0.5, 0.4, torch.Generator())
+
+
+def test_sampling_is_seeded():
+    model = tiny_builtin()
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(1, 3, 16, 16, generator=g), torch.rand(1, 3, 16, 16, generator=g)
+    run = lambda seed: restore_image(model, a, b, a, SamplerConfig(steps=6, n_start=2, seed=seed))
+    assert torch.equal(run(4), run(4))
+    assert not torch.equal(run(4), run(5))
+
+
+def test_flow_loss_is_zero_for_the_true_velocity_and_positive_otherwise():
+    x0 = torch.rand(2, 3, 4, 4)
+
+    def exact(z, t):  # v = eps - x0 recovered from z and the known x0
+        tt = t.reshape(-1, 1, 1, 1)
+        return (z - x0) / tt
+
+    assert float(flow.flow_loss(exact, x0, torch.Generator().manual_seed(0))) < 1e-8
+    assert float(flow.flow_loss(lambda z, t: torch.zeros_like(z), x0, torch.Generator().manual_seed(0))) > 0.1

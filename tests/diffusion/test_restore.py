@@ -1,0 +1,97 @@
+import numpy as np
+import pytest
+
+from symdrive_core import conventions
+from symdrive_core.diffusion.restore import Camera, LateralChain, chain_positions, method_step
+from symdrive_core.diffusion.sampler import SamplerConfig
+
+
+class OffsetRenderer:
+    """A stand-in renderer whose image encodes the camera's lateral offset in its pixel value."""
+
+    def shifted(self, K, c2w, offset, width, height):
+        return np.full((height, width, 3), 0.5 + offset / 10.0, np.float32)
+
+
+class RecordingRestorer:
+    """Returns (left + right) / 2 after recording which views it was given (in pixel values)."""
+
+    def __init__(self):
+        from symdrive_core.diffusion.latent import PixelSpace
+
+        self.latent = PixelSpace()
+        self.pairs = []
+
+    def time_shift(self, shape):
+        return 0.0
+
+    def velocity(self, z, t, left, right):
+        self.pairs.append((round(float(left.mean() + 1) / 2, 4), round(float(right.mean() + 1) / 2, 4)))
+        y = (left + right) / 2  # exact velocity of a point mass at the mean of the two views
+        return (z - y) / t.reshape(-1, 1, 1, 1)
+
+
+def chain(step_sampler=None):
+    step_sampler = step_sampler or SamplerConfig(steps=2, n_start=0)
+    restorer = RecordingRestorer()
+    recorded = np.full((4, 6, 3), 0.5, np.float32)
+    return restorer, LateralChain(
+        restorer, OffsetRenderer(), recorded, Camera(np.eye(3), np.eye(4), 6, 4), step_sampler
+    )
+
+
+def value(offset):
+    return round(0.5 + offset / 10.0, 4)
+
+
+def test_chain_positions():
+    assert chain_positions(3.0, 0.5) == pytest.approx([0.5, 1, 1.5, 2, 2.5, 3])
+    assert chain_positions(-1.5, 1.0) == pytest.approx([-0.75, -1.5])
+    assert chain_positions(0.5, 1.0) == pytest.approx([0.5])
+    assert method_step("ar_d0.5") == 0.5 and method_step("single_view") == 0.0
+    with pytest.raises(ValueError):
+        method_step("ar_dx")
+
+
+def test_right_chain_conditions_on_the_previous_view_and_the_render_beyond():
+    restorer, c = chain()
+    c.restore(1.0, 0.5)
+    firsts = [restorer.pairs[0], restorer.pairs[2]]  # 2 sampler steps per view
+    assert firsts[0] == (0.5, value(1.0))  # (I_0, render(2d)) -> I_d
+    restored_d = (0.5 + value(1.0)) / 2
+    assert firsts[1] == (round(restored_d, 4), value(1.5))  # (I_d, render(3d)) -> I_2d
+
+
+def test_left_chain_swaps_the_conditions():
+    restorer, c = chain()
+    c.restore(-0.5, 0.5)
+    assert restorer.pairs[0] == (value(-1.0), 0.5)
+
+
+def test_single_view_duplicates_the_render_at_the_target():
+    restorer, c = chain()
+    c.restore(2.0, 0.0)
+    assert restorer.pairs[0] == (value(2.0), value(2.0))
+
+
+def test_chains_share_their_prefix_and_offset_zero_is_the_recording():
+    _, c = chain()
+    for off in (0.5, 1.0, 1.5, 2.0, 3.0):
+        c.restore(off, 0.5)
+    assert c.samples == 6  # 0.5 .. 3.0 each sampled once (2.5 on the way to 3.0)
+    assert c.restore(0.0, 0.5) is c.recorded
+
+
+def test_init_is_the_render_at_the_target():
+    """With N_start at the last step, one Euler step from the noised target render."""
+    restorer, c = chain(SamplerConfig(steps=2, n_start=1, seed=0))
+    out = c.restore(0.5, 0.5)
+    # t = 0.5: z = 0.5 render(0.5) + 0.5 eps; the step to 0 lands on the oracle's target
+    assert np.allclose(out, (0.5 + value(1.0)) / 2, atol=1e-5)
+    assert len(restorer.pairs) == 1
+
+
+def test_camera_shift_matches_conventions():
+    c2w = np.eye(4)
+    cam = Camera(np.eye(3), c2w, 4, 4)
+    assert np.allclose(cam.shifted(2.0), conventions.lateral_shift(c2w, 2.0))
