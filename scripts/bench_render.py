@@ -230,6 +230,8 @@ def main():
     ap.add_argument("--threads", type=int, default=0, help="torch and numba threads (default: all cores)")
     ap.add_argument("--only", default="", help="comma list of: counts,res,rss,vehicles,knobs")
     ap.add_argument("--counts", default="", help="comma list overriding the count sweep (e.g. 100000)")
+    ap.add_argument("--vehicle-sizes", default="", help="comma list overriding the vehicle sizes (e.g. 4000)")
+    ap.add_argument("--background", type=int, default=0, help="background Gaussians of the vehicle table")
     ap.add_argument("--rss-child", nargs=3, type=int, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.threads:
@@ -263,7 +265,8 @@ def main():
         if want("rss"):
             bench_rss(1_000_000, 1280, 720, results)
         if want("vehicles"):
-            bench_vehicles(1_000_000, [4_000, 100_000], [5, 10, 25, 50], (1280, 720), results)
+            sizes = [int(c) for c in args.vehicle_sizes.split(",")] if args.vehicle_sizes else [4_000, 100_000]
+            bench_vehicles(args.background or 1_000_000, sizes, [5, 10, 25, 50], (1280, 720), results)
         if want("knobs"):
             bench_knobs(1_000, (320, 180), results)
     print(f"\n# total {time.time() - t0:.0f} s, load average now {os.getloadavg()[0]:.2f}")

@@ -17,7 +17,6 @@ from .errors import SymDriveError
 # Modules that add subcommands; each defines ``add_commands(subparsers)``.
 COMMAND_MODULES = [
     "symdrive_core.commands",
-    "symdrive_core.splat.commands",
     "symdrive_core.optim.commands",
     "symdrive_core.diffusion.commands",
     "symdrive_core.traffic.commands",
@@ -30,19 +29,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="symdrive", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name and name.startswith(exc.name):  # area not built yet
-                continue
-            raise
-        module.add_commands(sub)
+        importlib.import_module(name).add_commands(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    args.invocation = " ".join(["symdrive", *argv])  # recorded in outputs for reproduction
     try:
         return int(args.func(args) or 0)
     except SymDriveError as exc:

@@ -19,6 +19,11 @@ Design of the built-in backend, which must train on a CPU in minutes and ship in
   with nine input channels compares them locally for almost no extra cost, while in-context
   tokens triple the sequence length of every attention layer. Flux, whose attention is global
   anyway, gets the token layout (``flux``), as Kontext does.
+* **A correction on the condition mean, trained where sampling runs.** The network's output is
+  a preconditioned correction to the clean centre view on top of a blend of the noisy state and
+  the mean of the two side views (``unet``), so an untrained or weak model starts from its
+  inputs instead of from noise; and training draws ``t`` mostly from ``[0, t_max]``, the range
+  the position-accurate start (``N_start``) actually visits (``train``, ``flow.training_times``).
 
 Nothing here downloads anything: the built-in weights ship in ``weights/``, and Flux loads only
 from files the user names.

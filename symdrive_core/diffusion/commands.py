@@ -49,6 +49,13 @@ def add_commands(sub) -> None:
         ("--seed", int, "seed of every batch and noise draw (default 0)"),
         ("--threads", int, "torch threads (default 1)"),
         ("--checkpoint-every", int, "steps between checkpoints (default 250)"),
+        (
+            "--t-max",
+            float,
+            "train on noise levels t <= T_MAX (default 0.85; sampling from N_start 10 of 50 starts at 0.8)",
+        ),
+        ("--full-fraction", float, "share of each batch drawn on all of t in [0, 1] (default 0.1)"),
+        ("--output", str, "network output: skip (correction on the condition mean, default) or v"),
     ):
         p.add_argument(flag, type=kind, help=text)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.safetensors")
@@ -120,11 +127,11 @@ def _train(args) -> int:
     from .train import TrainConfig, train_restorer
 
     cfg = TrainConfig()
-    for name in ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every"):
+    names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
+    for name in (*names, "t_max", "full_fraction", "output"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
-    command = " ".join(["symdrive", *sys.argv[1:]])
-    record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=command)
+    record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "data")})
     return 0
 

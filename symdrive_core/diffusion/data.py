@@ -138,6 +138,10 @@ class PairSet:
         if not path.exists():
             raise InputError(path, "pairs file not found (write one with `symdrive make-pairs`)")
         data = load_file(str(path))
+        from safetensors import safe_open
+
+        with safe_open(str(path), "np") as f:
+            self.metadata = dict(f.metadata() or {})
         missing = {"left", "target", "right"} - set(data)
         if missing:
             raise InputError(path, f"not a pairs file: no {', '.join(sorted(missing))}")

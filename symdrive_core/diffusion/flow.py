@@ -85,12 +85,39 @@ def euler(
     return z
 
 
-def flow_loss(velocity: Velocity, x0: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-    """Mean squared velocity error at uniformly drawn ``t`` (the paper's training objective)."""
-    t = torch.rand(x0.shape[0], generator=generator, dtype=x0.dtype)
+def training_times(
+    batch: int, generator: torch.Generator, t_max: float = 1.0, full_fraction: float = 0.0
+) -> torch.Tensor:
+    """Noise levels for one batch: uniform on ``[0, t_max]``, except a ``full_fraction`` share
+    drawn on all of ``[0, 1]``. Sampling that starts at step ``N_start`` only ever evaluates the
+    model at ``t <= ts[N_start]``, so training can spend its steps there and keep a little
+    full-range coverage for sampling from pure noise."""
+    u = torch.rand(batch, generator=generator, dtype=torch.float32)
+    full = torch.rand(batch, generator=generator) < full_fraction
+    return torch.where(full, u, u * float(t_max))
+
+
+def flow_loss(
+    velocity: Velocity,
+    x0: torch.Tensor,
+    generator: torch.Generator,
+    *,
+    t_max: float = 1.0,
+    full_fraction: float = 0.0,
+    weight: Callable[[torch.Tensor], torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """Mean squared velocity error (the paper's training objective) at ``t`` drawn by
+    :func:`training_times` (uniform on ``[0, 1]`` by default), optionally weighted per sample."""
+    if t_max >= 1.0 and full_fraction == 0.0:
+        t = torch.rand(x0.shape[0], generator=generator, dtype=x0.dtype)
+    else:
+        t = training_times(x0.shape[0], generator, t_max, full_fraction).to(x0.dtype)
     eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype)
     v = velocity(noised(x0, eps, t), t)
-    return torch.mean((v - velocity_target(x0, eps)) ** 2)
+    err = ((v - velocity_target(x0, eps)) ** 2).flatten(1).mean(1)
+    if weight is not None:
+        err = err * weight(t)
+    return err.mean()
 
 
 def renoise(z_t: torch.Tensor, t: float, t_up: float, generator: torch.Generator) -> torch.Tensor:

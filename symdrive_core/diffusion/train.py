@@ -5,6 +5,12 @@ Adam with a short warm-up and a cosine decay, an exponential moving average of t
 ``checkpoint_every`` steps holding model, EMA and Adam state. Every batch and noise draw comes
 from a generator seeded by ``(seed, step)``, so a run resumed from a checkpoint continues
 exactly as an uninterrupted one would.
+
+Noise levels are drawn uniformly on ``[0, t_max]`` with a ``full_fraction`` share on all of
+``[0, 1]``: the default sampler starts at ``N_start = 10`` of 50 steps, i.e. ``t = 0.8``, and never
+evaluates the model above it, while RePaint or ``N_start = 0`` still get some coverage. The
+squared velocity error is weighted per sample by ``UNet.loss_weight`` (unit scale for the
+network's correction under the ``skip`` output).
 """
 
 from __future__ import annotations
@@ -41,9 +47,14 @@ class TrainConfig:
     threads: int = 1  # 2+ threads on a shared 2-core machine ran 20x slower (oversubscription)
     width: int = UNetConfig.width
     mults: tuple[int, ...] = UNetConfig.mults
+    output: str = UNetConfig.output  # "skip" (correction on the condition mean) or "v"
+    # noise levels trained on: uniform on [0, t_max] plus a full_fraction share on [0, 1].
+    # The default sampler (50 steps, N_start 10, no shift) starts at t = 0.8.
+    t_max: float = 0.85
+    full_fraction: float = 0.1
 
     def unet(self) -> UNetConfig:
-        return UNetConfig(width=self.width, mults=tuple(self.mults))
+        return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -141,7 +152,14 @@ def train_restorer(
         left, target, right = data.batch(cfg.batch, cfg.crop, g)
         lat = model.latent
         zl, zr = lat.encode(left), lat.encode(right)
-        loss = flow.flow_loss(lambda z, t, zl=zl, zr=zr: model.velocity(z, t, zl, zr), lat.encode(target), g)
+        loss = flow.flow_loss(
+            lambda z, t, zl=zl, zr=zr: model.velocity(z, t, zl, zr),
+            lat.encode(target),
+            g,
+            t_max=cfg.t_max,
+            full_fraction=cfg.full_fraction,
+            weight=net.loss_weight,
+        )
         for group in opt.param_groups:
             group["lr"] = learning_rate(cfg, step)
         opt.zero_grad(set_to_none=True)
@@ -158,7 +176,12 @@ def train_restorer(
     record = {
         "config": {**asdict(cfg), "unet": cfg.unet().to_json()},
         "command": command,
-        "data": {"file": Path(pairs).name, "sha256": file_sha256(pairs), "pairs": len(data)},
+        "data": {
+            "file": Path(pairs).name,
+            "sha256": file_sha256(pairs),
+            "pairs": len(data),
+            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets") if k in data.metadata},
+        },
         "steps": cfg.steps,
         "resumed_from": start,
         "final_loss": round(sum(tail) / max(len(tail), 1), 6),

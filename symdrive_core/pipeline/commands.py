@@ -27,6 +27,12 @@ def add_commands(sub) -> None:
     p.add_argument("--device", default="cpu")
     p.set_defaults(func=_batch)
 
+    p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
+    p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
+    p.add_argument("--quick", action="store_true", help="fewer frames and sampler steps, no refinement (minutes)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_demo)
+
 
 def _plan(args) -> int:
     from ..cli import print_json
@@ -61,4 +67,14 @@ def _batch(args) -> int:
     for r in reports:
         ran = [s["name"] for s in r["stages"] if s["ran"]]
         print(f"{r['scene']}: ran {', '.join(ran)}")
+    return 0
+
+
+def _demo(args) -> int:
+    from .demo import run_demo
+
+    report = run_demo(args.out, quick=args.quick, progress=not args.quiet)
+    print(f"demo finished in {report['demo_seconds']} s: {args.out}/report.md, {args.out}/report.json")
+    for key, rows in report["metrics"].items():
+        print(f"  {key}: {rows}")
     return 0

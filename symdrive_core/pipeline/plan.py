@@ -200,8 +200,11 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,
                 visible, culled, degrees, inputs_hash(manifest))
     if previous and previous.get("inputs_hash") == plan.inputs_hash:
+        # A stage is reused only if every running stage after it is too: later stages take
+        # what earlier ones hand over in memory, so the first stage to redo redoes the rest.
+        done = set(previous.get("completed", []))
         for s in plan.stages:
-            if s.run and s.name in previous.get("completed", []):
+            if s.run and all(t.name in done for t in plan.stages[plan.stages.index(s):] if t.run):
                 s.cached, s.reason = True, s.reason + " (cached: inputs unchanged)"
     return plan
 

@@ -34,6 +34,10 @@ class Report:
                 "stages": self.stages, "metrics": self.metrics, **self.extra}
 
     def write(self, out_dir: Path) -> Path:
-        path = Path(out_dir) / "report.json"
-        write_text_atomic(path, json.dumps(self.to_json(), indent=1) + "\n")
-        return path
+        return write_report_json(out_dir, self.to_json())
+
+
+def write_report_json(out_dir: Path, report: dict) -> Path:
+    path = Path(out_dir) / "report.json"
+    write_text_atomic(path, json.dumps(report, indent=1) + "\n")
+    return path

@@ -14,13 +14,15 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ..io.images import read_image, write_image, write_mask
+from ..io.images import write_image, write_mask
 from ..scene import Manifest, check_files, load_manifest
+from . import stages
 from .plan import Plan, PlanOptions, make_plan
 from .report import Report
+from .stages import Shared, StageOptions
 from .state import RunState
 
-STAGE_DIRS = ["render", "masks"]
+STAGE_DIRS = ["reconstruction", "render", "masks", "restore", "refine", "harmonize", "finetune", "insertion_assets"]
 
 
 @dataclass
@@ -32,6 +34,8 @@ class RunContext:
     report: Report
     device: str
     progress: bool
+    options: StageOptions
+    shared: Shared
 
     def frame_path(self, kind: str, camera: str, frame: int, suffix: str = ".png", actor: str | None = None) -> Path:
         return output_path(self.out, kind, camera, frame, suffix, actor)
@@ -70,34 +74,15 @@ def _render_stage(ctx: RunContext) -> dict:
     return {"frames_rendered": done, "frames_reused": len(jobs) - done}
 
 
-def _evaluate_stage(ctx: RunContext) -> dict:
-    from ..metrics import psnr, ssim
-
-    heldout = set(ctx.manifest.ground_truth.get("heldout_frames", []))
-    rows = []
-    for cam in ctx.manifest.cameras:
-        for fi, cf in enumerate(cam.frames):
-            if cf.image is None or (heldout and fi not in heldout):
-                continue
-            gt = read_image(ctx.manifest.resolve(cf.image), channels=3)
-            pred = read_image(ctx.frame_path("render", cam.name, fi), channels=3)
-            rows.append((psnr(pred, gt), ssim(pred, gt)))
-    if rows:
-        key = "psnr_heldout" if heldout else "psnr"
-        ctx.report.metrics["reconstruction"] = {
-            key: round(sum(r[0] for r in rows) / len(rows), 3),
-            key.replace("psnr", "ssim"): round(sum(r[1] for r in rows) / len(rows), 4),
-            "frames": len(rows)}
-    return {"frames_evaluated": len(rows)}
-
-
-STAGE_RUNNERS = {"render": _render_stage, "evaluate": _evaluate_stage}
+STAGE_RUNNERS = {"reconstruct": stages.reconstruct_stage, "render": _render_stage, "restore": stages.restore_stage,
+                 "refine": stages.refine_stage, "harmonize": stages.harmonize_stage,
+                 "finetune": stages.finetune_stage, "evaluate": stages.evaluate_stage}
 # Sub-effects decided by the planner and applied inside other stages (no runner of their own).
 APPLIED_INSIDE = {"shadow_region": "harmonize", "sh_eval": "render"}
 
 
 def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, device: str = "cpu",
-              progress: bool = True) -> dict:
+              progress: bool = True, stage_options: StageOptions | None = None) -> dict:
     manifest = load_manifest(package)
     check_files(manifest)
     out = Path(out_dir) if out_dir is not None else manifest.root / manifest.output
@@ -105,22 +90,23 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
     plan = make_plan(manifest, options, previous=RunState.load_raw(out))
     state = RunState.open(out, plan.inputs_hash, STAGE_DIRS)
     report = Report(manifest.name, device)
-    ctx = RunContext(manifest, plan, out, state, report, device, progress)
+    ctx = RunContext(manifest, plan, out, state, report, device, progress, stage_options or StageOptions(), Shared())
     for decision in plan.stages:
         name = decision.name
         if not decision.run:
             report.stage(name, False, decision.reason)
         elif name in APPLIED_INSIDE:
             report.stage(name, True, f"{decision.reason} (applied in {APPLIED_INSIDE[name]})")
-        elif name not in STAGE_RUNNERS:
-            report.stage(name, False, f"{decision.reason}; this stage is not available in `symdrive run` yet")
         elif decision.cached:
+            report.metrics.update(state.metrics.get(name, {}))
             report.stage(name, False, decision.reason, state.seconds.get(name))
         else:
+            before = {k: repr(v) for k, v in report.metrics.items()}
             t0 = time.perf_counter()
             details = STAGE_RUNNERS[name](ctx) or {}
             dt = time.perf_counter() - t0
-            state.finish(name, dt)
+            added = {k: v for k, v in report.metrics.items() if before.get(k) != repr(v)}
+            state.finish(name, dt, added)
             report.stage(name, True, decision.reason, dt, **details)
     report.write(out)
     return report.to_json()

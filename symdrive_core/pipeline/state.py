@@ -20,6 +20,7 @@ class RunState:
     inputs_hash: str
     completed: list[str] = field(default_factory=list)
     seconds: dict[str, float] = field(default_factory=dict)
+    metrics: dict[str, dict] = field(default_factory=dict)  # what each stage added to the report
 
     @staticmethod
     def load_raw(out_dir: Path) -> dict | None:
@@ -36,19 +37,20 @@ class RunState:
         raw = cls.load_raw(out_dir)
         if raw is not None and raw.get("inputs_hash") == inputs_hash:
             return cls(out_dir / "state.json", inputs_hash, list(raw.get("completed", [])),
-                       dict(raw.get("seconds", {})))
+                       dict(raw.get("seconds", {})), dict(raw.get("metrics", {})))
         for d in stage_dirs:
             shutil.rmtree(out_dir / d, ignore_errors=True)
         state = cls(out_dir / "state.json", inputs_hash)
         state.save()
         return state
 
-    def finish(self, stage: str, seconds: float) -> None:
+    def finish(self, stage: str, seconds: float, metrics: dict | None = None) -> None:
         if stage not in self.completed:
             self.completed.append(stage)
-        self.seconds[stage] = self.seconds.get(stage, 0.0) + seconds
+        self.seconds[stage] = seconds
+        self.metrics[stage] = metrics or {}
         self.save()
 
     def save(self) -> None:
         write_text_atomic(self.path, json.dumps({"inputs_hash": self.inputs_hash, "completed": self.completed,
-                                                 "seconds": self.seconds}, indent=1) + "\n")
+                                                 "seconds": self.seconds, "metrics": self.metrics}, indent=1) + "\n")

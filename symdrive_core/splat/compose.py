@@ -111,7 +111,8 @@ def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, w
         parts["quats"].append(q)
         parts["scales"].append(g.scales)
         parts["opac"].append(g.opacities)
-        parts["colors"].append(sh_to_color(g.sh_degree, g.sh, dirs).to(g.sh.dtype))
+        sh_backend = "torch" if backend == "torch" else "auto"
+        parts["colors"].append(sh_to_color(g.sh_degree, g.sh, dirs, backend=sh_backend).to(g.sh.dtype))
         k = actor_ids.index(aid) if aid != 0 else -1
         parts["groups"].append(torch.full((len(g),), k, dtype=torch.int64, device=device))
     dtype = dtype or torch.float32

@@ -1,6 +1,9 @@
-"""EWA projection of 3D Gaussians to 2D conics, vectorised in torch (differentiable by autograd).
+"""EWA projection of 3D Gaussians to 2D conics.
 
-Numerics follow gsplat / 3DGS:
+Two implementations of the same maths: :func:`project_gaussians_torch`, vectorised torch
+(differentiable by autograd; the reference, also used for non-CPU tensors), and the numba kernels of
+:mod:`.proj_kernels` with a hand-written backward pass (:class:`ProjectGaussians`), the CPU fast path.
+:func:`project_gaussians` picks one (``backend``). Numerics follow gsplat / 3DGS:
 
 * positions are taken relative to the camera centre in float64 before anything else, so a scene
   1e5 m from the origin keeps its precision; the whole projection runs in float64 and its outputs
@@ -24,6 +27,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 EXTENT_CAP = 3.33
@@ -84,10 +88,11 @@ def extent_factor(extent, opac: torch.Tensor, alpha_threshold: float) -> torch.T
     raise ValueError(f"extent must be 'opacity', '3sigma' or a number, got {extent!r}")
 
 
-def project_gaussians(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
-                      near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
-                      extent="opacity", alpha_threshold: float = 1.0 / 255.0,
-                      finite_mask: torch.Tensor | None = None) -> Projection:
+def project_gaussians_torch(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
+                            near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                            extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                            finite_mask: torch.Tensor | None = None) -> Projection:
+    """The vectorised torch projection (reference; gradients by autograd)."""
     n = means.shape[0]
     dtype = means.dtype
     f64 = torch.float64
@@ -157,3 +162,126 @@ def project_gaussians(means, quats, scales, opacities, viewmat, K, width: int, h
     return Projection(means2d=mean2d.to(dtype), conics=conics.to(dtype), depths=zs.to(dtype),
                       opacities=o_out.to(dtype), radii=radii, visible=valid, rel_means=rel,
                       camera_center=c)
+
+
+def _extent_params(extent, alpha_threshold: float) -> tuple[int, float, float]:
+    """(mode, k, cap) for the kernels; the same choices and errors as :func:`extent_factor`."""
+    from . import proj_kernels as pk
+
+    if isinstance(extent, (int, float)) and not isinstance(extent, bool):
+        return pk.EXTENT_NUMBER, float(extent), 0.0
+    if extent == "3sigma":
+        return pk.EXTENT_NUMBER, 3.0, 0.0
+    if extent == "opacity":
+        cap = EXTENT_CAP if alpha_threshold >= 1.0 / 255.0 else math.sqrt(2.0 * math.log(1.0 / alpha_threshold))
+        return pk.EXTENT_OPACITY, 0.0, cap
+    raise ValueError(f"extent must be 'opacity', '3sigma' or a number, got {extent!r}")
+
+
+def _arr(t: torch.Tensor) -> np.ndarray:
+    """A contiguous numpy view (copy only when needed) of a float32/float64 tensor; others as float64."""
+    t = t.detach().cpu()
+    if t.dtype not in (torch.float32, torch.float64):
+        t = t.to(torch.float64)
+    return np.ascontiguousarray(t.numpy())
+
+
+def _np_dtype(dtype: torch.dtype):
+    return np.float32 if dtype == torch.float32 else np.float64
+
+
+class ProjectGaussians(torch.autograd.Function):
+    """Numba projection: (means, quats, scales, opacities) -> (means2d, conics, depths, opacities,
+    rel_means, radii, visible); gradients by :func:`proj_kernels.project_bwd`. The kernels read
+    float32 or float64 storage directly and compute in float64."""
+
+    @staticmethod
+    def forward(ctx, means, quats, scales, opacities, cam_args, fwd_args, finite_mask):
+        from . import proj_kernels as pk
+        from .numba_scope import KernelScope
+
+        n = means.shape[0]
+        dtype = means.dtype
+        nd = _np_dtype(dtype)
+        arrays = (_arr(means), _arr(quats), _arr(scales), _arr(opacities), finite_mask)
+        m2d = np.empty((n, 2), nd)
+        conic = np.empty((n, 3), nd)
+        depth = np.empty(n, nd)
+        opac = np.empty(n, nd)
+        radii = np.empty((n, 2), np.int32)
+        visible = np.empty(n, np.bool_)
+        rel = np.empty((n, 3))
+        with KernelScope(chunk=0, items=n):
+            pk.project_fwd(*arrays, *cam_args, *fwd_args, m2d, conic, depth, opac, radii, visible, rel)
+        ctx.save_for_backward(means, quats, scales, opacities)
+        ctx.finite_mask = finite_mask
+        ctx.cam_args = cam_args
+        ctx.visible = visible
+        radii_t = torch.from_numpy(radii).to(means.device)
+        visible_t = torch.from_numpy(visible).to(means.device)
+        ctx.mark_non_differentiable(radii_t, visible_t)
+
+        def out(a):
+            return torch.from_numpy(a).to(device=means.device, dtype=dtype)
+
+        return (out(m2d), out(conic), out(depth), out(opac), torch.from_numpy(rel).to(means.device), radii_t,
+                visible_t)
+
+    @staticmethod
+    def backward(ctx, g_m2d, g_conic, g_depth, g_opac, g_rel, _g_radii, _g_visible):
+        from . import proj_kernels as pk
+        from .numba_scope import KernelScope
+
+        tensors = ctx.saved_tensors
+        n = tensors[0].shape[0]
+        d = [np.empty((n,) + tuple(t.shape[1:]), _np_dtype(t.dtype)) for t in tensors]
+        grads = [_arr(g) for g in (g_m2d, g_conic, g_depth, g_opac, g_rel)]
+        with KernelScope(chunk=0, items=n):
+            pk.project_bwd(*[_arr(t) for t in tensors], ctx.finite_mask, *ctx.cam_args, ctx.visible, *grads, *d)
+        return tuple(torch.from_numpy(a).to(device=t.device, dtype=t.dtype) for a, t in zip(d, tensors)) + (
+            None, None, None)
+
+
+def project_gaussians_numba(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
+                            near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                            extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                            finite_mask: torch.Tensor | None = None) -> Projection:
+    """The numba projection (CPU tensors): same outputs as :func:`project_gaussians_torch`."""
+    n = means.shape[0]
+    mode, ext_k, cap = _extent_params(extent, alpha_threshold)
+    c = camera_center(viewmat)
+    rv = viewmat.detach().to(torch.float64).cpu()[:3, :3].contiguous().numpy()
+    Kd = K.detach().to(torch.float64)
+    fx, fy, cx, cy = (float(Kd[0, 0]), float(Kd[1, 1]), float(Kd[0, 2]), float(Kd[1, 2]))
+    tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
+    lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
+    lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
+    cam_args = (rv, np.ascontiguousarray(c.cpu().numpy()), fx, fy, cx, cy, lim_x_neg, lim_x_pos, lim_y_neg,
+                lim_y_pos, float(near), float(far), float(eps2d), bool(antialiased), AA_COMPENSATION_FLOOR)
+    fwd_args = (mode, ext_k, cap, float(alpha_threshold), float(width), float(height), RADIUS_MAX)
+    fm = (np.ones(n, np.bool_) if finite_mask is None
+          else np.ascontiguousarray(finite_mask.detach().cpu().numpy().astype(np.bool_)))
+    m2d, conics, depths, opac, rel, radii, visible = ProjectGaussians.apply(
+        means, quats, scales, opacities, cam_args, fwd_args, fm)
+    return Projection(means2d=m2d, conics=conics, depths=depths, opacities=opac, radii=radii, visible=visible,
+                      rel_means=rel, camera_center=c)
+
+
+def use_numba(*tensors) -> bool:
+    """The numba kernels serve CPU float32/float64 tensors."""
+    return all(t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64) for t in tensors)
+
+
+def project_gaussians(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
+                      near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                      extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                      finite_mask: torch.Tensor | None = None, backend: str = "auto") -> Projection:
+    """Project Gaussians (see the module docstring). ``backend``: ``"numba"``, ``"torch"`` or
+    ``"auto"`` (numba for CPU float tensors, else torch). Differentiable either way."""
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"projection backend must be auto, numba or torch, got {backend!r}")
+    if backend == "auto":
+        backend = "numba" if use_numba(means, quats, scales, opacities) else "torch"
+    fn = project_gaussians_numba if backend == "numba" else project_gaussians_torch
+    return fn(means, quats, scales, opacities, viewmat, K, width, height, near=near, far=far, eps2d=eps2d,
+              antialiased=antialiased, extent=extent, alpha_threshold=alpha_threshold, finite_mask=finite_mask)

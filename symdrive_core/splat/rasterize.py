@@ -1,8 +1,10 @@
 """Public rasterizer: ``rasterize(...)`` with a hand-written tile-based backward pass.
 
-The split follows gsplat: projection and SH evaluation are vectorised torch (autograd gives their
-gradients); the expensive per-pixel compositing is a ``torch.autograd.Function`` whose forward and
-backward are the numba tile kernels of :mod:`symdrive_core.splat.kernels`.
+The split follows gsplat: projection (:class:`.projection.ProjectGaussians`), SH evaluation
+(:class:`.sh.SHColor`) and per-pixel compositing (:class:`RasterizePixels`) are each a
+``torch.autograd.Function`` whose forward and hand-written backward are numba kernels
+(:mod:`symdrive_core.splat.proj_kernels`, :mod:`symdrive_core.splat.kernels`); the torch backend runs
+the vectorised torch versions of all three instead (autograd gives their gradients).
 
 Backends: ``"numba"`` (CPU kernels), ``"torch"`` (the vectorised reference of
 :mod:`symdrive_core.splat.reference`, differentiable by autograd), ``"gsplat"`` (gsplat's CUDA
@@ -15,12 +17,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 import torch
 
 from . import kernels
-from .projection import camera_center, project_gaussians
+from .numba_scope import KernelScope as _KernelScope
+from .projection import camera_center, project_gaussians, use_numba
 from .sh import sh_to_color
 
 TILE_SIZE = kernels.TILE
@@ -50,31 +52,10 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
         return TileBins(np.zeros(tiles_x * tiles_y + 1, np.int64), np.zeros(0, np.int32), tiles_x, tiles_y,
                         tile_size)
     order = np.argsort(depths.detach().cpu().numpy(), kind="stable").astype(np.int64)
-    with _KernelScope():
+    with _KernelScope(chunk=0, items=m2d.shape[0]):
         rects = kernels.tile_rects(m2d, rad, tile_size, tiles_x, tiles_y)
     offsets, ids = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
     return TileBins(offsets, ids, tiles_x, tiles_y, tile_size)
-
-
-class _KernelScope:
-    """Run numba parallel kernels without side effects on torch.
-
-    numba's OpenMP layer shares libgomp with torch and resets the process's OpenMP thread count when
-    it launches a region, which silently undoes a caller's ``torch.set_num_threads``; the count is
-    restored on exit. Tiles are handed out in small chunks (uneven tiles balance across cores).
-    """
-
-    def __enter__(self):
-        self.torch_threads = torch.get_num_threads()
-        self.chunk = numba.get_parallel_chunksize()
-        numba.set_parallel_chunksize(2)
-        return self
-
-    def __exit__(self, *exc):
-        numba.set_parallel_chunksize(self.chunk)
-        if torch.get_num_threads() != self.torch_threads:
-            torch.set_num_threads(self.torch_threads)
-        return False
 
 
 def _np(t: torch.Tensor) -> np.ndarray:
@@ -97,7 +78,8 @@ class RasterizePixels(torch.autograd.Function):
         grp = _np(groups.to(torch.int64)) if G > 0 else np.zeros(0, np.int64)
         args = (_np(means2d), _np(conics), _np(opacities), _np(colors), grp, G, bins.offsets, bins.ids,
                 int(width), int(height), bins.tiles_x, bins.tile_size, float(threshold))
-        with _KernelScope():
+        # about 256 pixel evaluations per intersection: small jobs stay on one thread
+        with _KernelScope(items=bins.n_isect, serial_below=8192):
             kernels.rasterize_fwd(*args, out_color, out_T, out_inst, out_last)
         ctx.args = args
         ctx.outs = (out_color, out_T, out_inst, out_last)
@@ -128,7 +110,7 @@ class RasterizePixels(torch.autograd.Function):
         r_conic = np.zeros((n_isect, 3), np_dtype)
         r_opac = np.zeros(n_isect, np_dtype)
         r_color = np.zeros((n_isect, C), np_dtype)
-        with _KernelScope():
+        with _KernelScope(items=n_isect, serial_below=8192):
             kernels.rasterize_bwd(*args, out_color, out_T, out_inst, out_last, gc, ga, gi,
                                   r_m2d, r_conic, r_opac, r_color)
         g_m2d = np.zeros((m, 2), np.float64)
@@ -141,6 +123,21 @@ class RasterizePixels(torch.autograd.Function):
             return torch.from_numpy(a).to(device=device, dtype=dtype)
 
         return t(g_m2d), t(g_conic), t(g_opac), t(g_col), None, None, None, None, None, None
+
+
+def _rows_finite(a: torch.Tensor, backend: str) -> torch.Tensor:
+    """Bool [N]: every entry of row i finite (numba kernel on the CPU path)."""
+    if a.shape[0] == 0:
+        return torch.ones(0, dtype=torch.bool, device=a.device)
+    if backend == "numba" and use_numba(a):
+        from . import proj_kernels
+        from .projection import _arr
+
+        out = np.empty(a.shape[0], np.bool_)
+        with _KernelScope(chunk=0, items=a.shape[0]):
+            proj_kernels.rows_finite(_arr(a), out)
+        return torch.from_numpy(out).to(a.device)
+    return torch.isfinite(a).all(-1)
 
 
 def resolve_backend(backend: str, device: torch.device) -> str:
@@ -233,14 +230,15 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         deg = int(round(math.sqrt(k))) - 1 if sh_degree is None else int(sh_degree)
         if (deg + 1) ** 2 > k:
             raise ValueError(f"sh_degree {deg} needs {(deg + 1) ** 2} coefficients, colors has {k}")
-    col_finite = torch.isfinite(colors.reshape(n, -1)).all(-1) if n else torch.ones(0, dtype=torch.bool)
+    col_finite = (_rows_finite(colors.reshape(n, -1), backend) if n
+                  else torch.ones(0, dtype=torch.bool, device=device))
     proj = project_gaussians(means, quats, scales, opacities, viewmat, K, width, height, near=near, far=far,
                              eps2d=eps2d, antialiased=antialiased, extent=extent,
-                             alpha_threshold=alpha_threshold, finite_mask=col_finite)
+                             alpha_threshold=alpha_threshold, finite_mask=col_finite, backend=backend)
     vis = torch.nonzero(proj.visible, as_tuple=False).squeeze(1)
     if is_sh:
         sh_v = colors[vis]
-        feats = sh_to_color(deg, sh_v, proj.rel_means[vis]).to(colors.dtype)
+        feats = sh_to_color(deg, sh_v, proj.rel_means[vis], backend=backend).to(colors.dtype)
     else:
         feats = colors[vis]
     n_color = feats.shape[1]

@@ -3,10 +3,16 @@
 ``eval_sh`` returns the raw SH value per channel; the colour the rasterizer uses is
 ``max(eval_sh + 0.5, 0)`` (:func:`sh_to_color`). Directions are normalised inside (a zero direction
 gives a zero vector, never NaN). Coefficients are ``sh[N, K, 3]`` with ``K >= (degree + 1)**2``.
+
+``eval_sh`` / ``sh_to_color`` run the numba kernels of :mod:`.proj_kernels` (hand-written backward,
+:class:`SHColor`) for CPU float tensors and the torch versions (``eval_sh_torch`` /
+``sh_to_color_torch``, the reference, differentiable by autograd) otherwise or when
+``backend="torch"``.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 SH_C0 = 0.28209479177387814
@@ -48,16 +54,80 @@ def normalize_dirs(dirs: torch.Tensor) -> torch.Tensor:
     return torch.where(good, d * torch.rsqrt(safe), torch.zeros_like(d))
 
 
-def eval_sh(degree: int, sh: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-    """Raw SH value [N, C] of coefficients ``sh[N, K, C]`` in directions ``dirs[N, 3]`` (any length)."""
+def _check(degree: int, sh: torch.Tensor) -> int:
+    if not 0 <= degree <= 3:
+        raise ValueError(f"SH degree must be 0..3, got {degree}")
     k = (degree + 1) ** 2
     if sh.shape[1] < k:
         raise ValueError(f"degree {degree} needs {k} SH coefficients per channel, got {sh.shape[1]}")
+    return k
+
+
+def eval_sh_torch(degree: int, sh: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """Torch reference of :func:`eval_sh`."""
+    k = _check(degree, sh)
     d = normalize_dirs(dirs.to(sh.dtype))
     basis = sh_basis(degree, d)
     return torch.einsum("nk,nkc->nc", basis, sh[:, :k])
 
 
-def sh_to_color(degree: int, sh: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+def sh_to_color_torch(degree: int, sh: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """Torch reference of :func:`sh_to_color`."""
+    return torch.clamp_min(eval_sh_torch(degree, sh, dirs) + 0.5, 0.0)
+
+
+class SHColor(torch.autograd.Function):
+    """Numba SH evaluation: (sh [N,K,C], dirs [N,3]) -> [N,C] in sh's dtype (clamp: the colour).
+    float32 or float64 storage is read directly; the arithmetic is float64."""
+
+    @staticmethod
+    def forward(ctx, sh, dirs, degree, clamp):
+        from . import proj_kernels as pk
+        from .numba_scope import KernelScope
+        from .projection import _arr, _np_dtype
+
+        out = np.empty((sh.shape[0], sh.shape[2]), _np_dtype(sh.dtype))
+        with KernelScope(chunk=0, items=sh.shape[0]):
+            pk.sh_fwd(int(degree), _arr(sh), _arr(dirs), bool(clamp), out)
+        ctx.save_for_backward(sh, dirs)
+        ctx.opts = (int(degree), bool(clamp))
+        return torch.from_numpy(out).to(device=sh.device, dtype=sh.dtype)
+
+    @staticmethod
+    def backward(ctx, g_out):
+        from . import proj_kernels as pk
+        from .numba_scope import KernelScope
+        from .projection import _arr, _np_dtype
+
+        sh, dirs = ctx.saved_tensors
+        degree, clamp = ctx.opts
+        d_sh = np.zeros(tuple(sh.shape), _np_dtype(sh.dtype))
+        d_dirs = np.empty(tuple(dirs.shape), _np_dtype(dirs.dtype))
+        with KernelScope(chunk=0, items=sh.shape[0]):
+            pk.sh_bwd(degree, _arr(sh), _arr(dirs), clamp, _arr(g_out), d_sh, d_dirs)
+        return (torch.from_numpy(d_sh).to(device=sh.device, dtype=sh.dtype),
+                torch.from_numpy(d_dirs).to(device=dirs.device, dtype=dirs.dtype), None, None)
+
+
+def _use_numba(sh: torch.Tensor, dirs: torch.Tensor, backend: str) -> bool:
+    if backend not in ("auto", "numba", "torch"):
+        raise ValueError(f"SH backend must be auto, numba or torch, got {backend!r}")
+    if backend == "auto":
+        return all(t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64) for t in (sh, dirs))
+    return backend == "numba"
+
+
+def eval_sh(degree: int, sh: torch.Tensor, dirs: torch.Tensor, backend: str = "auto") -> torch.Tensor:
+    """Raw SH value [N, C] of coefficients ``sh[N, K, C]`` in directions ``dirs[N, 3]`` (any length)."""
+    if not _use_numba(sh, dirs, backend):
+        return eval_sh_torch(degree, sh, dirs)
+    _check(degree, sh)
+    return SHColor.apply(sh, dirs, int(degree), False)
+
+
+def sh_to_color(degree: int, sh: torch.Tensor, dirs: torch.Tensor, backend: str = "auto") -> torch.Tensor:
     """Colour ``max(eval_sh + 0.5, 0)`` as 3DGS and gsplat define it."""
-    return torch.clamp_min(eval_sh(degree, sh, dirs) + 0.5, 0.0)
+    if not _use_numba(sh, dirs, backend):
+        return sh_to_color_torch(degree, sh, dirs)
+    _check(degree, sh)
+    return SHColor.apply(sh, dirs, int(degree), True)

@@ -79,3 +79,12 @@ def test_flow_loss_is_zero_for_the_true_velocity_and_positive_otherwise():
 
     assert float(flow.flow_loss(exact, x0, torch.Generator().manual_seed(0))) < 1e-8
     assert float(flow.flow_loss(lambda z, t: torch.zeros_like(z), x0, torch.Generator().manual_seed(0))) > 0.1
+
+
+def test_training_times_cover_the_sampled_range():
+    g = torch.Generator().manual_seed(0)
+    t = flow.training_times(4000, g, t_max=0.8, full_fraction=0.1)
+    assert float(t.min()) >= 0.0 and float(t.max()) <= 1.0
+    share_above = float((t > 0.8).float().mean())
+    assert 0.005 < share_above < 0.04  # ~10% drawn on [0, 1], a fifth of them above 0.8
+    assert float((flow.training_times(4000, g, t_max=0.8) > 0.8).float().sum()) == 0.0

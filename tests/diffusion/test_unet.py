@@ -14,14 +14,9 @@ def test_any_frame_size_in_any_size_out():
 
 
 def test_fresh_network_predicts_zero_and_depends_on_every_input():
-    assert (
-        float(
-            UNet(TINY)(torch.rand(1, 3, 8, 8), torch.rand(1), torch.rand(1, 3, 8, 8), torch.rand(1, 3, 8, 8))
-            .abs()
-            .max()
-        )
-        == 0.0
-    )
+    v_net = UNet(UNetConfig(width=8, mults=(1, 2), output="v"))
+    r = [torch.rand(1, 3, 8, 8) for _ in range(3)]
+    assert float(v_net(r[0], torch.rand(1), r[1], r[2]).detach().abs().max()) == 0.0
     net = tiny_builtin().net
     g = torch.Generator().manual_seed(0)
     a, b, c = (torch.rand(1, 3, 16, 16, generator=g) for _ in range(3))
@@ -43,3 +38,35 @@ def test_weights_round_trip_with_their_config(tmp_path):
 def test_config_json_round_trip():
     cfg = UNetConfig(width=16, mults=(1, 2, 4))
     assert UNetConfig.from_json(cfg.to_json()) == cfg
+
+
+def _x0(net, z, t, left, right):
+    tt = torch.tensor([t])
+    return z - t * net(z, tt, left, right)
+
+
+def test_fresh_skip_network_blends_the_noisy_state_and_the_condition_mean():
+    net = UNet(TINY)
+    g = torch.Generator().manual_seed(1)
+    z, left, right = (torch.rand(1, 3, 8, 8, generator=g) * 2 - 1 for _ in range(3))
+    # nearly clean: the state itself; nearly pure noise: the mean of the two conditions
+    assert torch.allclose(_x0(net, z, 1e-3, left, right), z, atol=1e-3)
+    assert torch.allclose(_x0(net, z, 0.999, left, right), (left + right) / 2, atol=1e-3)
+    # in between, the least-squares blend with weight s^2 (1 - t) / D on the state
+    s2, t = TINY.cond_sigma**2, 0.5
+    d = (1 - t) ** 2 * s2 + t**2
+    expected = (s2 * (1 - t) * z + t**2 * (left + right) / 2) / d
+    assert torch.allclose(_x0(net, z, t, left, right), expected, atol=1e-5)
+
+
+def test_loss_weight_makes_the_correction_unit_scale():
+    t = torch.tensor([0.1, 0.5, 0.9])
+    assert torch.equal(UNet(UNetConfig(width=8, mults=(1, 2), output="v")).loss_weight(t), torch.ones(3))
+    s2 = TINY.cond_sigma**2
+    assert torch.allclose(UNet(TINY).loss_weight(t), ((1 - t) ** 2 * s2 + t**2) / s2)
+
+
+def test_checkpoints_without_an_output_field_predict_velocity():
+    d = UNetConfig(width=8, mults=(1, 2)).to_json()
+    del d["output"]
+    assert UNetConfig.from_json(d).output == "v"

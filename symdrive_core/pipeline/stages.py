@@ -1,0 +1,251 @@
+"""The stages ``symdrive run`` executes beyond rendering: restore, refine, harmonize, finetune,
+evaluate. Each is a thin call into the library; heavy modules are imported inside, so a plan
+that skips a stage never loads its code (no diffusion model for a scene that needs none).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class StageOptions:
+    """Knobs that trade quality for time (``symdrive bench accuracy-time`` measures them)."""
+
+    frames: list[int] | None = None  # restore/evaluate only these frames (None: all)
+    offsets: tuple[float, ...] | None = None  # restore/evaluate only these lateral offsets (None: all)
+    ar_step: float = 0.5  # auto-regressive step d in metres (the paper's 0.5)
+    sampler_steps: int = 50  # the paper's 50 steps...
+    n_start: int = 10  # ...starting at step 10 from the noised render
+    eval_methods: tuple[str, ...] = ("single_view", "ar_d0.5", "ar_d1.0")
+    refine_iters: int = 600
+    harmonize_steps: int = 50
+    harmonize_start: float = 0.2  # start at this fraction of the steps from the noised render (10 of 50)
+    finetune_steps: int = 300
+    insertion_train_views: int = 6
+    seed: int = 0
+
+
+@dataclass
+class Shared:
+    """What one stage hands to the next within a run (loaded once)."""
+
+    background: object = None  # Gaussians
+    restorer: object = None
+    restored: list = field(default_factory=list)  # RestoredView, for refinement
+
+
+def background(ctx):
+    from ..io.ply import read_splats
+
+    if ctx.shared.background is None:
+        ctx.shared.background = read_splats(ctx.manifest.resolve(ctx.manifest.background_splats))
+    return ctx.shared.background
+
+
+def restorer(ctx):
+    from ..diffusion.models import load_restorer
+
+    if ctx.shared.restorer is None:
+        ctx.shared.restorer = load_restorer()
+    return ctx.shared.restorer
+
+
+def _sampler(opts: StageOptions):
+    from ..diffusion.sampler import SamplerConfig
+
+    return SamplerConfig(steps=opts.sampler_steps, n_start=opts.n_start, seed=opts.seed)
+
+
+def _has_lateral_truth(manifest) -> bool:
+    return bool((manifest.ground_truth or {}).get("lateral"))
+
+
+def reconstruct_stage(ctx) -> dict:
+    """Fit background Gaussians to the package's images (it had none)."""
+    from ..optim.reconstruct import reconstruct
+
+    out = ctx.out / "reconstruction"
+    result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
+    ctx.manifest.background_splats = str((out / "background.ply").resolve())
+    return {k: v for k, v in vars(result).items() if isinstance(v, (int, float))}
+
+
+def restore_stage(ctx) -> dict:
+    """Restore every (frame, lateral offset) by the auto-regressive chain from the recorded view;
+    with lateral ground truth, also score raw 3DGS and the ablations on those views."""
+    from tqdm import tqdm
+
+    from dataclasses import replace
+
+    from .. import conventions
+    from ..diffusion.data import SplatRenderer
+    from ..diffusion.restore import Camera, LateralChain, RestoredView, run_lateral_restoration, score_gaussians
+    from ..io.images import read_image, write_image
+    from .run import output_path
+
+    m, opts = ctx.manifest, ctx.options
+    g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
+    default = f"ar_d{opts.ar_step:g}"
+    offsets = m.effects.lateral_offsets if opts.offsets is None else list(opts.offsets)
+    done: set[tuple[int, float]] = set()
+    if ctx.plan.runs("evaluate") and _has_lateral_truth(m):
+        methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
+        lateral = [e for e in m.ground_truth["lateral"] if float(e["offset_m"]) in offsets]
+        scored = replace(m, ground_truth={**m.ground_truth, "lateral": lateral})
+        res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
+                                      progress=ctx.progress)
+        ctx.report.metrics["lateral"] = score_gaussians(scored, g, "raw_3dgs", opts.frames) + res.rows
+        ctx.shared.restored = list(res.views[default])
+        for v in ctx.shared.restored:
+            write_image(output_path(ctx.out, "restore", f"{m.cameras[0].name}/{v.offset_m:+g}", v.frame), v.image)
+            done.add((v.frame, round(v.offset_m, 6)))
+    render = SplatRenderer(g)
+    jobs = [(cam, fi, off) for cam in m.cameras for fi in (opts.frames or range(len(cam.frames)))
+            for off in offsets if (fi, round(off, 6)) not in done]
+    for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
+        path = output_path(ctx.out, "restore", f"{cam.name}/{off:+g}", fi)
+        cf = cam.frames[fi]
+        if path.exists():
+            image = read_image(path, channels=3)
+        else:
+            recorded = read_image(m.resolve(cf.image), channels=3) if cf.image else render(
+                cf.K, cf.world_to_camera, cam.width, cam.height)
+            chain = LateralChain(model, render, recorded, Camera(cf.K, cf.camera_to_world, cam.width, cam.height),
+                                 sampler)
+            image = chain.restore(off, opts.ar_step)
+            write_image(path, image)
+        c2w = conventions.lateral_shift(cf.camera_to_world, off)
+        ctx.shared.restored.append(RestoredView(fi, off, cf.K, c2w, conventions.invert_rigid(c2w), cam.width,
+                                                cam.height, image))
+    return {"views_restored": len(ctx.shared.restored)}
+
+
+def refine_stage(ctx) -> dict:
+    """Fine-tune the background on the recorded views plus the restored lateral views."""
+    from ..diffusion.refine import RefineConfig, refine_gaussians
+    from ..diffusion.restore import score_gaussians
+    from ..io.ply import write_splats
+
+    refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
+                                      RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
+                                      progress=ctx.progress)
+    write_splats(ctx.out / "refine" / "background.ply", refined)
+    if ctx.plan.runs("evaluate") and _has_lateral_truth(ctx.manifest):
+        ctx.report.metrics.setdefault("lateral", []).extend(
+            r for r in score_gaussians(ctx.manifest, refined, "refined", ctx.options.frames)
+            if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets)
+    return {"iterations": ctx.options.refine_iters, **{k: v for k, v in stats.items() if isinstance(v, (int, float))}}
+
+
+def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
+    """Vehicle pixels (from the render's instance masks) ∪ each vehicle's shadow region."""
+    from ..insertion.shadow import harmonization_region, shadow_region
+    from ..io.images import read_mask
+    from .run import output_path
+
+    m = ctx.manifest
+    region = None
+    for aid in ctx.plan.stage("harmonize").actors:
+        mpath = output_path(ctx.out, "masks", cam.name, fi, actor=aid)
+        if aid not in ctx.plan.visible[cam.name][fi] or not mpath.exists():
+            continue
+        actor = m.actor(aid)
+        shadow = None
+        if ctx.plan.runs("shadow_region") and actor.wlh is not None:
+            cf = cam.frames[fi]
+            shadow = shadow_region(actor.pose(fi), actor.wlh, m.effects.sun_direction, cf.camera_to_world, cf.K,
+                                   cam.width, cam.height)
+        r = harmonization_region(read_mask(mpath), shadow)
+        region = r if region is None else region | r
+    return region
+
+
+def _harmonizer(ctx):
+    from ..insertion.harmonizer import restorer_harmonizer
+
+    o = ctx.options
+    return restorer_harmonizer(restorer(ctx), steps=o.harmonize_steps, n_start=round(o.harmonize_start * o.harmonize_steps),
+                               seed=o.seed)
+
+
+def harmonize_stage(ctx) -> dict:
+    """RePaint harmonization of each rendered frame that shows an inserted vehicle."""
+    from tqdm import tqdm
+
+    from ..io.images import read_image, write_image, write_mask
+    from .run import output_path
+
+    harmonizer = _harmonizer(ctx)
+    jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("harmonize").frames]
+    n = 0
+    for cam, fi in tqdm(jobs, desc="harmonize", unit="frame", disable=not ctx.progress):
+        path = output_path(ctx.out, "harmonize", cam.name, fi)
+        region = _inserted_region(ctx, cam, fi)
+        if path.exists() or region is None or not region.any():
+            continue
+        image = read_image(output_path(ctx.out, "render", cam.name, fi), channels=3)
+        write_mask(output_path(ctx.out, "harmonize", cam.name, fi, ".region.png"), region.astype(np.float32))
+        write_image(path, harmonizer(image, region))
+        n += 1
+    return {"frames_harmonized": n}
+
+
+def finetune_stage(ctx) -> dict:
+    """Colour/opacity-only fine-tune of each inserted vehicle on its harmonized frames."""
+    from ..insertion.evaluate import InsertionConfig, finetune_sample, insert_frame
+    from ..insertion.placements import camera_view
+    from ..io.images import read_image
+    from ..io.ply import read_splats, write_splats
+    from ..optim.finetune import FinetuneConfig, finetune_colors
+    from ..splat.tensors import GaussianTensors
+    from .run import output_path
+
+    cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))
+    bg = GaussianTensors.from_gaussians(background(ctx))
+    written = []
+    for aid in ctx.plan.stage("finetune").actors:
+        out = ctx.out / "finetune" / f"{aid}.ply"
+        if out.exists():
+            written.append(aid)
+            continue
+        actor = ctx.manifest.actor(aid)
+        vehicle = read_splats(ctx.manifest.resolve(actor.splats))
+        samples = []
+        for cam in ctx.manifest.cameras:
+            for fi in ctx.plan.stage("harmonize").frames:
+                target_path = output_path(ctx.out, "harmonize", cam.name, fi)
+                if aid not in ctx.plan.visible[cam.name][fi] or not target_path.exists():
+                    continue
+                frame = insert_frame(ctx.manifest, bg, vehicle, actor.pose(fi), actor.wlh,
+                                     camera_view(ctx.manifest, fi, cam.name))
+                if frame.region.any():
+                    samples.append(finetune_sample(frame, read_image(target_path, channels=3), bg, vehicle, cfg))
+        if samples:
+            write_splats(out, finetune_colors(vehicle, samples, cfg.finetune, progress=ctx.progress).gaussians)
+            written.append(aid)
+    return {"actors_finetuned": len(written)}
+
+
+def evaluate_stage(ctx) -> dict:
+    """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
+    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..optim.evaluate import evaluate_heldout
+    from ..optim.finetune import FinetuneConfig
+    from ..world.package import split_frames
+
+    m, opts, details = ctx.manifest, ctx.options, {}
+    if m.background_splats and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
+        ctx.report.metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
+    if (m.ground_truth or {}).get("insertion") and m.background_splats:
+        harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
+        cfg = InsertionConfig(train_views=opts.insertion_train_views,
+                              finetune=FinetuneConfig(steps=opts.finetune_steps, seed=opts.seed),
+                              assets_out=ctx.out / "insertion_assets")
+        ctx.report.metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
+                                                             details=details, progress=ctx.progress)
+        ctx.report.extra.setdefault("timings", {}).update(details.get("timings", {}))
+    return {"metrics": sorted(ctx.report.metrics)}
