@@ -26,7 +26,7 @@ import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from symdrive_core.splat import GaussianTensors, Layer, rasterize, render_layers, render_oracle  # noqa: E402
+from symdrive_core.splat import GaussianTensors, Layer, rasterize, render_layers, render_oracle
 
 
 def make_scene(n, width, height, seed=0, deg=3, dtype=torch.float32, fov_deg=70.0):
@@ -242,7 +242,7 @@ def main():
         rss_child(*args.rss_child)
         return
     only = set(filter(None, args.only.split(",")))
-    want = lambda k: not only or k in only  # noqa: E731
+    want = lambda k: not only or k in only
     print(f"# bench_render: cores={os.cpu_count()} torch threads={torch.get_num_threads()} "
           f"load average={os.getloadavg()[0]:.2f} quick={args.quick}")
     results = []

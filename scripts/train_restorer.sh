@@ -12,5 +12,5 @@ export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1
 
 symdrive make-pairs "$PACKAGE" --offsets 0.5,1,1.5,2,2.5,3 --out "$WORK/pairs.safetensors"
 # defaults: --output skip --t-max 0.85 --full-fraction 0.1 --batch 8 --crop 64 --lr 4e-4
-symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/run" --steps 3500 --ema 0.999 --seed 0 --threads 1
+symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/run" --steps 3000 --ema 0.999 --seed 0 --threads 1
 cp "$WORK/run/restorer.safetensors" "$WORK/run/restorer.json" symdrive_core/diffusion/weights/

@@ -124,6 +124,13 @@ def blender_intrinsics(
     return intrinsics(fx, fy, cx, cy)
 
 
+def scale_intrinsics(K: np.ndarray, sx: float, sy: float | None = None) -> np.ndarray:
+    """K for the same camera at an image ``sx`` (``sy``) times as wide (tall). Pixel edges sit at
+    integers and centres at +0.5, so every continuous coordinate simply scales: cx' = sx * cx."""
+    sy = sx if sy is None else sy
+    return np.diag([float(sx), float(sy), 1.0]) @ np.asarray(K, dtype=np.float64)
+
+
 def pixel_centers(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """(u, v) coordinates of every pixel centre, each [H, W]."""
     u = np.arange(width, dtype=np.float64) + PIXEL_CENTER_OFFSET

@@ -103,7 +103,7 @@ class Gaussians:
             return np.zeros(3, np.float32), np.zeros(3, np.float32)
         return self.means.min(axis=0), self.means.max(axis=0)
 
-    def subset(self, index) -> "Gaussians":
+    def subset(self, index) -> Gaussians:
         return Gaussians(
             means=self.means[index],
             quats=self.quats[index],
@@ -122,7 +122,7 @@ class Gaussians:
         return ok
 
     @staticmethod
-    def from_activated(means, quats, scales, opacities, colors_or_sh) -> "Gaussians":
+    def from_activated(means, quats, scales, opacities, colors_or_sh) -> Gaussians:
         """Build from activated values; ``colors_or_sh`` is RGB [N,3] or SH [N,K,3]."""
         c = np.asarray(colors_or_sh, dtype=np.float32)
         sh = rgb_to_sh_dc(c)[:, None, :] if c.ndim == 2 else c

@@ -31,8 +31,8 @@ def add_commands(sub) -> None:
 def _insert(args) -> int:
     from pathlib import Path
 
-    from .render_actor import insert_actor
     from ..scene import load_manifest
+    from .render_actor import insert_actor
 
     manifest = load_manifest(args.package)
     out = Path(args.out) if args.out else manifest.root / manifest.output / "insert"

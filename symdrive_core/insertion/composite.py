@@ -40,7 +40,7 @@ class CameraView:
     def camera_to_world(self) -> np.ndarray:
         return conventions.invert_rigid(self.world_to_camera)
 
-    def crop(self, rows: slice, cols: slice) -> "CameraView":
+    def crop(self, rows: slice, cols: slice) -> CameraView:
         """The sub-window ``[rows, cols]`` as a camera of its own (principal point moved)."""
         K = np.array(self.K, dtype=np.float64, copy=True)
         K[0, 2] -= cols.start

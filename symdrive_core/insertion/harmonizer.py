@@ -6,7 +6,7 @@ so evaluation, fine-tuning and tests can pass any function of that shape.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -113,8 +113,9 @@ def gaussians_from_params(params: dict[str, torch.Tensor]) -> Gaussians:
 
 
 def render(params: dict[str, torch.Tensor], view_K, viewmat, width: int, height: int,
-           sh_degree: int, render_depth: bool = False):
-    """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info)."""
+           sh_degree: int, render_depth: bool = False, **raster_options):
+    """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info).
+    ``raster_options`` go to :func:`symdrive_core.splat.rasterize` (antialiased, extent, ...)."""
     from ..splat import rasterize
 
     sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
@@ -122,7 +123,7 @@ def render(params: dict[str, torch.Tensor], view_K, viewmat, width: int, height:
     quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
     return rasterize(params["means"], quats, params["log_scales"].exp(),
                      torch.sigmoid(params["opacity_logits"]), sh, viewmat, view_K, width, height,
-                     sh_degree=sh_degree, render_depth=render_depth)
+                     sh_degree=sh_degree, render_depth=render_depth, **raster_options)
 
 
 def render_gaussians(g: Gaussians, K, world_to_camera, width: int, height: int) -> np.ndarray:

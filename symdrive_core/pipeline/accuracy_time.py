@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from ..io.atomic import atomic_path, write_text_atomic
 
@@ -31,7 +31,8 @@ def run_settings(settings: list[Setting], progress: bool = True) -> list[dict]:
     for s in tqdm(settings, desc="accuracy-time", unit="setting", disable=not progress):
         t0 = time.perf_counter()
         quality = s.measure()
-        seconds = quality.pop("seconds", None) or (time.perf_counter() - t0)
+        elapsed = time.perf_counter() - t0
+        seconds = quality.pop("seconds") if "seconds" in quality else elapsed
         rows.append({"knob": s.knob, "value": s.value, "default": s.default, "seconds": round(seconds, 4),
                      **{k: (round(v, 4) if isinstance(v, float) else v) for k, v in quality.items()}})
     for knob in {r["knob"] for r in rows}:
@@ -43,11 +44,11 @@ def run_settings(settings: list[Setting], progress: bool = True) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
-    lines = ["| knob | setting | PSNR (dB) | SSIM | seconds | Pareto |", "|---|---|---|---|---|---|"]
+    lines = ["| knob | setting | PSNR (dB) | SSIM | seconds | per | Pareto |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         name = f"**{r['value']}** (default)" if r["default"] else r["value"]
         lines.append(f"| {r['knob']} | {name} | {r['psnr']:.2f} | {r.get('ssim', float('nan')):.4f} | "
-                     f"{r['seconds']:.3f} | {'yes' if r['pareto'] else ''} |")
+                     f"{r['seconds']:.3f} | {r.get('per', 'run')} | {'yes' if r['pareto'] else ''} |")
     return "\n".join(lines)
 
 
@@ -66,8 +67,12 @@ def write_outputs(rows: list[dict], out_dir: str | Path, notes: dict[str, str] |
         md.append(f"- **{knob}**: {why}")
     write_text_atomic(out / "accuracy_time.md", "\n".join(md) + "\n")
     knobs = list(dict.fromkeys(r["knob"] for r in rows))
-    fig, axes = plt.subplots(1, len(knobs), figsize=(3.2 * len(knobs), 3.0), squeeze=False)
-    for ax, knob in zip(axes[0], knobs):
+    columns = min(4, len(knobs))
+    rows_n = (len(knobs) + columns - 1) // columns
+    fig, axes = plt.subplots(rows_n, columns, figsize=(3.6 * columns, 3.0 * rows_n), squeeze=False)
+    for ax in axes.ravel()[len(knobs):]:
+        ax.axis("off")
+    for ax, knob in zip(axes.ravel(), knobs):
         mine = sorted((r for r in rows if r["knob"] == knob), key=lambda r: r["seconds"])
         ax.plot([r["seconds"] for r in mine], [r["psnr"] for r in mine], "o-", color="0.6")
         for r in mine:
@@ -75,7 +80,8 @@ def write_outputs(rows: list[dict], out_dir: str | Path, notes: dict[str, str] |
                     color="tab:red" if r["default"] else ("tab:blue" if r["pareto"] else "0.5"))
             ax.annotate(r["value"], (r["seconds"], r["psnr"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.set_title(knob, fontsize=9)
-        ax.set_xlabel("seconds")
+        ax.ticklabel_format(useOffset=False)
+        ax.set_xlabel(f"seconds per {mine[0].get('per', 'run')}")
         ax.set_ylabel("PSNR (dB)")
         ax.grid(alpha=0.3)
     fig.tight_layout()

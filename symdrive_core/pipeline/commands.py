@@ -33,6 +33,14 @@ def add_commands(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_demo)
 
+    bench = sub.add_parser("bench", help="measurements").add_subparsers(dest="bench", required=True, metavar="BENCH")
+    p = bench.add_parser("accuracy-time", help="quality against ground truth and time, knob by knob, in one run")
+    p.add_argument("--out", required=True, help="directory for accuracy_time.md/.json and pareto.png")
+    p.add_argument("--package", help="scene package with ground truth (default: the built-in street world)")
+    p.add_argument("--quick", action="store_true", help="fewer frames, views and placements per setting")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_accuracy_time)
+
 
 def _plan(args) -> int:
     from ..cli import print_json
@@ -67,6 +75,24 @@ def _batch(args) -> int:
     for r in reports:
         ran = [s["name"] for s in r["stages"] if s["ran"]]
         print(f"{r['scene']}: ran {', '.join(ran)}")
+    return 0
+
+
+def _accuracy_time(args) -> int:
+    from ..scene import load_manifest
+    from .accuracy_time import format_table, run_settings, write_outputs
+    from .demo import DEMO_PACKAGE
+    from .knobs import WHY_DEFAULTS, package_settings
+
+    manifest = load_manifest(args.package or DEMO_PACKAGE)
+    settings, skipped = package_settings(manifest, quick=args.quick)
+    for group, why in skipped.items():
+        print(f"left out {group} knobs: {why}")
+    rows = run_settings(settings, progress=not args.quiet)
+    knobs = {r["knob"] for r in rows}
+    paths = write_outputs(rows, args.out, {k: v for k, v in WHY_DEFAULTS.items() if k in knobs})
+    print(format_table(rows))
+    print(f"wrote {paths['md']}, {paths['json']}, {paths['png']}")
     return 0
 
 

@@ -17,7 +17,7 @@ from .stages import StageOptions
 
 DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
-QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), sampler_steps=20, n_start=4, eval_methods=("single_view",),
+QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), eval_methods=("single_view",),
                      harmonize_steps=10, finetune_steps=80, insertion_train_views=2)
 FULL = StageOptions(frames=[2, 12, 22], refine_iters=300)
 

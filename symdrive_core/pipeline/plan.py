@@ -27,6 +27,9 @@ from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_b
 STAGES = ("reconstruct", "render", "restore", "refine", "harmonize", "shadow_region", "finetune",
           "sh_eval", "evaluate")
 DIFFUSION_STAGES = ("restore", "harmonize")
+# Sub-effects decided here but applied inside another stage (no runner of their own); they are
+# cached exactly when their host stage is.
+APPLIED_INSIDE = {"shadow_region": "harmonize", "sh_eval": "render"}
 
 
 @dataclass
@@ -204,7 +207,10 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
         # what earlier ones hand over in memory, so the first stage to redo redoes the rest.
         done = set(previous.get("completed", []))
         for s in plan.stages:
-            if s.run and all(t.name in done for t in plan.stages[plan.stages.index(s):] if t.run):
+            later = plan.stages[plan.stages.index(s):]
+            host = APPLIED_INSIDE.get(s.name)
+            if s.run and (plan.stage(host).cached if host else
+                          all(t.name in done or t.name in APPLIED_INSIDE for t in later if t.run)):
                 s.cached, s.reason = True, s.reason + " (cached: inputs unchanged)"
     return plan
 

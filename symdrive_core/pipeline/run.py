@@ -17,7 +17,7 @@ from tqdm import tqdm
 from ..io.images import write_image, write_mask
 from ..scene import Manifest, check_files, load_manifest
 from . import stages
-from .plan import Plan, PlanOptions, make_plan
+from .plan import APPLIED_INSIDE, Plan, PlanOptions, make_plan
 from .report import Report
 from .stages import Shared, StageOptions
 from .state import RunState
@@ -77,8 +77,6 @@ def _render_stage(ctx: RunContext) -> dict:
 STAGE_RUNNERS = {"reconstruct": stages.reconstruct_stage, "render": _render_stage, "restore": stages.restore_stage,
                  "refine": stages.refine_stage, "harmonize": stages.harmonize_stage,
                  "finetune": stages.finetune_stage, "evaluate": stages.evaluate_stage}
-# Sub-effects decided by the planner and applied inside other stages (no runner of their own).
-APPLIED_INSIDE = {"shadow_region": "harmonize", "sh_eval": "render"}
 
 
 def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, device: str = "cpu",

@@ -31,9 +31,10 @@ class RunState:
             return None
 
     @classmethod
-    def open(cls, out_dir: Path, inputs_hash: str, stage_dirs: list[str]) -> "RunState":
+    def open(cls, out_dir: Path, inputs_hash: str, stage_dirs: list[str]) -> RunState:
         """Resume the state in ``out_dir``; stale outputs from other inputs are removed."""
         out_dir = Path(out_dir)
+        _remove_partial_files(out_dir)
         raw = cls.load_raw(out_dir)
         if raw is not None and raw.get("inputs_hash") == inputs_hash:
             return cls(out_dir / "state.json", inputs_hash, list(raw.get("completed", [])),
@@ -54,3 +55,12 @@ class RunState:
     def save(self) -> None:
         write_text_atomic(self.path, json.dumps({"inputs_hash": self.inputs_hash, "completed": self.completed,
                                                  "seconds": self.seconds, "metrics": self.metrics}, indent=1) + "\n")
+
+
+def _remove_partial_files(out_dir: Path) -> None:
+    """Temporaries a killed run left behind (``.<name>.<random>.part<ext>``, see io.atomic)."""
+    for p in sorted(out_dir.rglob(".*.part*"), reverse=True):
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)

@@ -1,11 +1,10 @@
 """Scene packages: manifest (versioned, validated), cameras, poses and trajectories. numpy only."""
 
-from .manifest import (Actor, Camera, CameraFrame, Effects, Frame, IdMap, Manifest, ManifestError,
-                       MaskEntry, check_files, load_manifest, parse_manifest)
-from .visibility import box_corners_world, box_in_frustum, vehicle_local_box
+from .manifest import (Actor, Camera, CameraFrame, Effects, Frame, IdMap, Manifest, ManifestError, MaskEntry,
+                       check_files, load_manifest, parse_manifest)
 from .poses import Pose, interpolate_pose, matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
+from .visibility import box_corners_world, box_in_frustum, vehicle_local_box
 
-__all__ = ["Actor", "Camera", "CameraFrame", "Effects", "Frame", "IdMap", "Manifest", "ManifestError",
-           "MaskEntry", "Pose", "check_files", "interpolate_pose", "load_manifest", "matrix_to_quat",
-           "parse_manifest", "quat_multiply", "quat_slerp", "quat_to_matrix",
-           "box_corners_world", "box_in_frustum", "vehicle_local_box"]
+__all__ = ["Actor", "Camera", "CameraFrame", "Effects", "Frame", "IdMap", "Manifest", "ManifestError", "MaskEntry",
+           "Pose", "box_corners_world", "box_in_frustum", "check_files", "interpolate_pose", "load_manifest",
+           "matrix_to_quat", "parse_manifest", "quat_multiply", "quat_slerp", "quat_to_matrix", "vehicle_local_box"]

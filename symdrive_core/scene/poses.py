@@ -89,12 +89,12 @@ class Pose:
     rotation: np.ndarray  # [4] wxyz, unit
 
     @staticmethod
-    def from_matrix(M) -> "Pose":
+    def from_matrix(M) -> Pose:
         M = np.asarray(M, dtype=np.float64)
         return Pose(M[:3, 3].copy(), matrix_to_quat(M[:3, :3]))
 
     @staticmethod
-    def identity() -> "Pose":
+    def identity() -> Pose:
         return Pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
 
     @property
@@ -110,7 +110,7 @@ class Pose:
     def apply(self, points) -> np.ndarray:
         return np.asarray(points, dtype=np.float64) @ self.R.T + self.translation
 
-    def compose(self, other: "Pose") -> "Pose":
+    def compose(self, other: Pose) -> Pose:
         """self ∘ other: first ``other``, then ``self``."""
         return Pose(self.apply(other.translation[None])[0],
                     quat_normalize(quat_multiply(self.rotation, other.rotation)))

@@ -120,7 +120,7 @@ def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, w
     if parts["means"]:
         cat = {k: torch.cat(v, 0) for k, v in parts.items()}
     else:
-        z = lambda *s: torch.zeros(*s, dtype=dtype, device=device)  # noqa: E731
+        z = lambda *s: torch.zeros(*s, dtype=dtype, device=device)
         cat = {"means": z(0, 3).double(), "quats": z(0, 4), "scales": z(0, 3), "opac": z(0), "colors": z(0, 3),
                "groups": torch.zeros(0, dtype=torch.int64, device=device)}
     # means are camera-relative (formed in float64, small now); the rasterizer sees a camera at the origin

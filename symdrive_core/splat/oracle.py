@@ -52,7 +52,7 @@ def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, he
                   sh_degree=None, near=0.01, far=1e10, eps2d=0.3, antialiased=False, render_depth=False,
                   alpha_threshold=1.0 / 255.0, extent="opacity", tile_cull=True, tile_size=16):
     """Returns dict(rgb [H,W,C], alpha [H,W,1], depth [H,W,1] or None, radii [N,2]) in float64."""
-    f = lambda a: np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)  # noqa: E731
+    f = lambda a: np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)
     means, quats, scales, opac, colors = f(means), f(quats), f(scales), f(opacities), f(colors)
     V, K = f(viewmat), f(K)
     n = means.shape[0]

@@ -31,21 +31,21 @@ class GaussianTensors:
         return self.means.dtype
 
     @staticmethod
-    def from_gaussians(g: Gaussians, device="cpu", dtype=torch.float32) -> "GaussianTensors":
+    def from_gaussians(g: Gaussians, device="cpu", dtype=torch.float32) -> GaussianTensors:
         def t(a):
             return torch.as_tensor(np.ascontiguousarray(a), device=device).to(dtype)
 
         return GaussianTensors(means=t(g.means), quats=t(g.unit_quats), scales=t(g.scales),
                                opacities=t(g.opacities), sh=t(g.sh), sh_degree=g.sh_degree)
 
-    def to(self, device=None, dtype=None) -> "GaussianTensors":
+    def to(self, device=None, dtype=None) -> GaussianTensors:
         def m(x):
             return x.to(device=device if device is not None else x.device, dtype=dtype or x.dtype)
 
         return GaussianTensors(m(self.means), m(self.quats), m(self.scales), m(self.opacities), m(self.sh),
                                self.sh_degree)
 
-    def subset(self, index) -> "GaussianTensors":
+    def subset(self, index) -> GaussianTensors:
         return GaussianTensors(self.means[index], self.quats[index], self.scales[index],
                                self.opacities[index], self.sh[index], self.sh_degree)
 

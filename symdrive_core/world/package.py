@@ -65,3 +65,13 @@ def lateral_views(manifest: Manifest) -> list[LateralView]:
             out.append(LateralView(off, int(key), cf.K, c2w, conventions.invert_rigid(c2w), rel,
                                    cam.width, cam.height))
     return out
+
+
+def with_lateral_offsets(manifest: Manifest, offsets) -> Manifest:
+    """A view of ``manifest`` whose lateral ground truth keeps only ``offsets`` (metres)."""
+    from dataclasses import replace
+
+    keep = {round(float(o), 6) for o in offsets}
+    gt = manifest.ground_truth or {}
+    lateral = [e for e in gt.get("lateral", []) if round(float(e["offset_m"]), 6) in keep]
+    return replace(manifest, ground_truth={**gt, "lateral": lateral})

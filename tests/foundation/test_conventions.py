@@ -90,3 +90,12 @@ def test_vehicle_frame():
 def test_bad_sensor_fit_names_the_field():
     with pytest.raises(ValueError, match="sensor_fit"):
         cv.blender_intrinsics(10, 10, 50, 36, 24, "DIAGONAL")
+
+
+def test_scale_intrinsics_keeps_the_image_edges_fixed():
+    K = cv.intrinsics(100.0, 110.0, 64.0, 36.0)  # centred in a 128x72 image
+    K2 = cv.scale_intrinsics(K, 0.5)
+    np.testing.assert_allclose(K2, [[50.0, 0, 32.0], [0, 55.0, 18.0], [0, 0, 1]])
+    # The point that lands on the right edge of the full image lands on the right edge at half size.
+    p = np.array([0.64, 0.0, 1.0])
+    assert (K @ p)[0] == 128.0 and (K2 @ p)[0] == 64.0

@@ -5,7 +5,13 @@ import torch
 
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.insertion.assets import flip_forward, load_vehicle_asset
-from symdrive_core.insertion.mesh_to_splats import TriMesh, linear_to_srgb, mesh_to_splats, read_obj, sample_colors
+from symdrive_core.insertion.mesh_to_splats import (
+    TriMesh,
+    linear_to_srgb,
+    mesh_to_splats,
+    read_obj,
+    sample_colors,
+)
 from symdrive_core.insertion.place import ground_height, grounded, place
 from symdrive_core.io.ply import write_splats
 from symdrive_core.scene import Pose

@@ -1,6 +1,12 @@
 import numpy as np
 
-from symdrive_core.insertion.baselines import background_ring, lab_to_rgb, naive, reinhard_transfer, rgb_to_lab
+from symdrive_core.insertion.baselines import (
+    background_ring,
+    lab_to_rgb,
+    naive,
+    reinhard_transfer,
+    rgb_to_lab,
+)
 
 
 def test_lab_round_trip():

@@ -1,8 +1,14 @@
 import numpy as np
 
 from symdrive_core import conventions
-from symdrive_core.insertion.shadow import (convex_hull, dilate, harmonization_region, inside_convex,
-                                            shadow_polygon, shadow_region)
+from symdrive_core.insertion.shadow import (
+    convex_hull,
+    dilate,
+    harmonization_region,
+    inside_convex,
+    shadow_polygon,
+    shadow_region,
+)
 from symdrive_core.scene import Pose
 
 from . import synthetic

@@ -3,7 +3,6 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
 
 from symdrive_core.cli import main
 from symdrive_core.io.ply import write_splats

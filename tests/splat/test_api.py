@@ -24,7 +24,7 @@ def test_package_import_is_light():
 
 
 def test_rasterize_name_is_the_function():
-    import symdrive_core.splat as splat
+    from symdrive_core import splat
     from symdrive_core.splat.rasterize import RasterizePixels  # the module stays importable
 
     assert callable(splat.rasterize) and not isinstance(splat.rasterize, type(sys))

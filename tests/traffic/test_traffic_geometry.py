@@ -2,16 +2,28 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from symdrive_core.errors import InputError
 from symdrive_core.scene import Actor, Pose
 from symdrive_core.scene.poses import quat_from_yaw
 from symdrive_core.traffic.fcd import read_fcd
-from symdrive_core.traffic.overlap import (OverlapError, check_actors, footprints, frame_gaps,
-                                           require_no_overlap)
-from symdrive_core.traffic.road import (Road, arc_points, offset_polyline, project_onto, road_from_json,
-                                        road_from_spec)
+from symdrive_core.traffic.overlap import (
+    OverlapError,
+    check_actors,
+    footprints,
+    frame_gaps,
+    require_no_overlap,
+)
+from symdrive_core.traffic.road import (
+    Road,
+    arc_points,
+    offset_polyline,
+    project_onto,
+    road_from_json,
+    road_from_spec,
+)
 
 
 def test_offset_polyline_stays_parallel_through_a_bend():

@@ -1,0 +1,122 @@
+"""``symdrive run`` end to end on tiny packages: outputs, report.json, caching, kill-and-resume,
+and the same outputs from the in-process and the Ray executor."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from symdrive_core.cli import main
+from symdrive_core.io.images import read_image, read_mask
+from symdrive_core.io.ply import write_splats
+from symdrive_core.pipeline.batch import run_batch
+from symdrive_core.pipeline.run import run_scene
+from tests.conftest import random_gaussians
+
+REPORT_KEYS = {"version", "scene", "device", "stages", "metrics"}
+
+
+def _outputs(out):
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file() and p.suffix in (".png", ".exr"))
+
+
+def test_run_writes_frames_masks_depth_and_report(make_package, tmp_path):
+    path = make_package(n_frames=3)
+    out = tmp_path / "out"
+    report = run_scene(path, out, progress=False)
+    assert _outputs(out) == sorted(
+        [f"render/front/{i:06d}.png" for i in range(3)] + [f"render/front/{i:06d}.depth.exr" for i in range(3)]
+        + [f"masks/front/car_0/{i:06d}.png" for i in range(3)])
+    on_disk = json.loads((out / "report.json").read_text())
+    assert on_disk == report and REPORT_KEYS <= set(report)
+    stages = {s["name"]: s for s in report["stages"]}
+    assert stages["render"]["ran"] and stages["render"]["frames_rendered"] == 3 and stages["render"]["seconds"] > 0
+    assert not stages["harmonize"]["ran"] and not stages["restore"]["ran"]
+    assert report["metrics"] == {}  # no ground truth in this package: nothing is made up
+    rgb = read_image(out / "render/front/000000.png", channels=3)
+    mask = read_mask(out / "masks/front/car_0/000000.png")
+    assert rgb.shape == (24, 32, 3) and mask.shape == (24, 32)
+    assert 0.0 < mask.max() <= 1.0  # the car ahead of the camera covers some pixels
+
+
+def test_rerun_with_same_inputs_reuses_everything(make_package, tmp_path):
+    path = make_package(n_frames=2)
+    out = tmp_path / "out"
+    run_scene(path, out, progress=False)
+    mtimes = {p: os.stat(out / p).st_mtime_ns for p in _outputs(out)}
+    again = run_scene(path, out, progress=False)
+    assert {p: os.stat(out / p).st_mtime_ns for p in _outputs(out)} == mtimes
+    render = next(s for s in again["stages"] if s["name"] == "render")
+    assert not render["ran"] and "unchanged" in render["reason"]
+    # A changed input invalidates the outputs.
+    write_splats(path.parent / "car_0.ply", random_gaussians(60, 1, 99, spread=0.8))
+    changed = run_scene(path, out, progress=False)
+    assert next(s for s in changed["stages"] if s["name"] == "render")["frames_rendered"] == 2
+
+
+def test_bad_package_exits_2_naming_the_field(make_package, tmp_path, capsys):
+    path = make_package()
+    d = json.loads(path.read_text())
+    d["cameras"][0]["width"] = -5
+    path.write_text(json.dumps(d))
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "manifest.json" in err and "width" in err
+    assert not (tmp_path / "out" / "report.json").exists()
+
+
+def test_killed_run_resumes_without_redoing_finished_frames(make_package, tmp_path):
+    frames = 120
+    path = make_package(n_frames=frames, width=160, height=120)
+    write_splats(path.parent / "background.ply", random_gaussians(20000, 0, 1, (10, 0, 1), 3.0))
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "symdrive_core.cli", "run", str(path), "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    renders = out / "render" / "front"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if len(list(renders.glob("[0-9]*.png"))) >= 2:
+            break
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done_before = sorted(renders.glob("[0-9]*.png"))
+    assert 2 <= len(done_before) < frames, "the run was not killed part-way; make the scene slower"
+    for p in done_before:  # what exists under its final name is complete
+        assert read_image(p).shape == (120, 160, 3)
+    mtimes = {p.name: p.stat().st_mtime_ns for p in done_before}
+
+    rerun = subprocess.run(cmd, capture_output=True, text=True)
+    assert rerun.returncode == 0, rerun.stderr
+    report = json.loads((out / "report.json").read_text())
+    render = next(s for s in report["stages"] if s["name"] == "render")
+    assert render["frames_rendered"] + render["frames_reused"] == frames
+    assert render["frames_reused"] >= len(done_before)
+    assert {p.name: p.stat().st_mtime_ns for p in done_before} == mtimes  # finished frames untouched
+    assert len(list(renders.glob("[0-9]*.png"))) == frames
+    assert not list(out.rglob(".*.part*")), "a temporary file of the killed run was left behind"
+
+
+@pytest.mark.slow
+def test_ray_executor_gives_the_same_outputs_as_local(make_package, tmp_path):
+    ray = pytest.importorskip("ray")
+    packages = [str(make_package(name, n_frames=5).parent) for name in ("scene_a", "scene_b")]
+    local = run_batch(packages, tmp_path / "local", progress=False)
+    try:
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+        distributed = run_batch(packages, tmp_path / "ray", executor="ray", frames_per_task=2)
+    finally:
+        ray.shutdown()
+    strip = lambda r: [{k: v for k, v in s.items() if k not in ("seconds", "frames_rendered", "frames_reused")}
+                       for s in r["stages"]]
+    assert [strip(r) for r in local] == [strip(r) for r in distributed]
+    for name in ("scene_a", "scene_b"):
+        a, b = tmp_path / "local" / name, tmp_path / "ray" / name
+        assert _outputs(a) == _outputs(b) and len(_outputs(a)) == 15
+        for rel in _outputs(a):
+            np.testing.assert_array_equal(read_image(a / rel), read_image(b / rel))
