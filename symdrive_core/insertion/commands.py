@@ -19,7 +19,7 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package with ground_truth.insertion")
     p.add_argument("--background", required=True, help="background splat PLY (the reconstruction)")
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
-    p.add_argument("--steps", type=int, help="harmonization sampler steps")
+    p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
     p.add_argument("--finetune-steps", type=int, default=300)
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")

@@ -18,16 +18,22 @@ from .stages import StageOptions
 DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
 QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), eval_methods=("single_view",),
-                     harmonize_steps=10, finetune_steps=80, insertion_train_views=2)
+                     finetune_steps=80, insertion_train_views=2)
 FULL = StageOptions(frames=[2, 12, 22], refine_iters=300)
 
 
-def road_trajectory(manifest, height_m: float, start_m: float = 10.0, speed_mps: float = 6.0,
+def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: float | None = None,
                     lane_right_m: float = 1.75) -> list:
     """One pose per frame driving along the world's road, ``lane_right_m`` right of its centre
-    line (the ego lane), starting ``start_m`` ahead of the first camera, heading along the road."""
+    line (the ego lane), starting ``start_m`` ahead of the first camera, heading along the road.
+    The default speed is 1.1 times the recording camera's, so the car pulls slowly away from it."""
     from ..scene.poses import Pose, quat_from_yaw
 
+    if speed_mps is None:
+        centres = [f.camera_to_world[:3, 3] for f in manifest.cameras[0].frames]
+        duration = manifest.frames[-1].timestamp - manifest.frames[0].timestamp
+        path = float(np.sum(np.linalg.norm(np.diff(centres, axis=0), axis=1)))
+        speed_mps = 1.1 * path / duration if duration > 0 else 0.0
     line = np.asarray(manifest.ground_truth["road"]["centerline"], dtype=np.float64)
     seg = np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1)
     along = np.concatenate([[0.0], np.cumsum(seg)])
@@ -183,9 +189,11 @@ def format_markdown(report: dict, figures: Path) -> str:
     lines = [f"# SymDrive demo: {report['scene']} ({report['demo_mode']})", "",
              f"Device {report['device']}; {report['demo_seconds']} s in all. Every number below was "
              "measured in this run against Cycles renders of the same cameras.", "", "## Stages", "",
-             "| stage | ran | why | seconds |", "|---|---|---|---|"]
+             "| stage | ran | why | seconds | did |", "|---|---|---|---|---|"]
     for s in report["stages"]:
-        lines.append(f"| {s['name']} | {'yes' if s['ran'] else 'no'} | {s['reason']} | {s.get('seconds', '')} |")
+        did = ", ".join(f"{k.replace('_', ' ')}: {v}" for k, v in s.items()
+                        if k not in ("name", "ran", "reason", "seconds") and not isinstance(v, (list, dict)))
+        lines.append(f"| {s['name']} | {'yes' if s['ran'] else 'no'} | {s['reason']} | {s.get('seconds', '')} | {did} |")
     rec = report["metrics"].get("reconstruction")
     if rec:
         lines += ["", "## Reconstruction (held-out frames)", "",

@@ -9,6 +9,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
+from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS
+
 
 @dataclass
 class StageOptions:
@@ -23,8 +26,8 @@ class StageOptions:
     n_start: int = 8
     eval_methods: tuple[str, ...] = ("single_view", "ar_d0.5", "ar_d1.0")
     refine_iters: int = 600
-    harmonize_steps: int = 50
-    harmonize_start: float = 0.2  # start at this fraction of the steps from the noised render (10 of 50)
+    harmonize_steps: int = HARMONIZE_STEPS  # the paper's 50 measure worse with the shipped restorer
+    harmonize_start: float = HARMONIZE_START  # start this fraction of the way down, from the noised render
     finetune_steps: int = 300
     insertion_train_views: int = 6
     seed: int = 0
@@ -173,8 +176,7 @@ def _harmonizer(ctx):
     from ..insertion.harmonizer import restorer_harmonizer
 
     o = ctx.options
-    return restorer_harmonizer(restorer(ctx), steps=o.harmonize_steps, n_start=round(o.harmonize_start * o.harmonize_steps),
-                               seed=o.seed)
+    return restorer_harmonizer(restorer(ctx), steps=o.harmonize_steps, start_fraction=o.harmonize_start, seed=o.seed)
 
 
 def harmonize_stage(ctx) -> dict:

@@ -119,6 +119,18 @@ def _cov2d(i, ok, means, quats, scales, R, cam, fx, fy, lxn, lxp, lyn, lyp, near
     return (in_depth, xs, ys, zs, rz, ux, uy, tx, ty, c00, c01, c11, qw, qx, qy, qz, qinv, qgood)
 
 
+@njit(cache=True)
+def _blurred_cov2d(c00, c01, c11, eps2d):
+    """The 2D covariance plus ``eps2d`` on the diagonal: (det before, b00, b11, det > 0, det or 1, 1 / that)."""
+    det_orig = c00 * c11 - c01 * c01
+    b00 = c00 + eps2d
+    b11 = c11 + eps2d
+    det = b00 * b11 - c01 * c01
+    det_ok = det > 0.0
+    det_s = det if det_ok else 1.0
+    return det_orig, b00, b11, det_ok, det_s, 1.0 / det_s
+
+
 @njit(parallel=True, cache=True)
 def project_fwd(means, quats, scales, opac, finite_mask, R, cam, fx, fy, cx, cy, lxn, lxp, lyn, lyp, near, far,
                 eps2d, antialiased, aa_floor, ext_mode, ext_k, ext_cap, threshold, width, height, radius_max,
@@ -135,15 +147,9 @@ def project_fwd(means, quats, scales, opac, finite_mask, R, cam, fx, fy, cx, cy,
          qw, qx, qy, qz, qinv, qgood) = _cov2d(i, ok, means, quats, scales, R, cam, fx, fy, lxn, lxp, lyn, lyp,
                                                near, far, rel, Rq, M, W, A)
         o = float(opac[i]) if ok else 0.0
-        det_orig = c00 * c11 - c01 * c01
-        b00 = c00 + eps2d
-        b11 = c11 + eps2d
-        det = b00 * b11 - c01 * c01
-        det_ok = det > 0.0
-        det_s = det if det_ok else 1.0
+        det_orig, b00, b11, det_ok, det_s, inv = _blurred_cov2d(c00, c01, c11, eps2d)
         if antialiased:
             o = o * math.sqrt(max(det_orig / det_s, aa_floor))
-        inv = 1.0 / det_s
         mx = fx * xs * rz + cx
         my = fy * ys * rz + cy
         valid = in_depth and det_ok and o >= threshold
@@ -203,13 +209,7 @@ def project_bwd(means, quats, scales, opac, finite_mask, R, cam, fx, fy, cx, cy,
          qw, qx, qy, qz, qinv, qgood) = _cov2d(i, ok, means, quats, scales, R, cam, fx, fy, lxn, lxp, lyn, lyp,
                                                near, far, rel, Rq, M, W, A)
         o = float(opac[i]) if ok else 0.0
-        det_orig = c00 * c11 - c01 * c01
-        b00 = c00 + eps2d
-        b11 = c11 + eps2d
-        det = b00 * b11 - c01 * c01
-        det_ok = det > 0.0
-        det_s = det if det_ok else 1.0
-        inv = 1.0 / det_s
+        det_orig, b00, b11, det_ok, det_s, inv = _blurred_cov2d(c00, c01, c11, eps2d)
         # opacity (masked by visibility) and antialiasing compensation
         g_o2 = float(g_opac[i]) if visible[i] else 0.0
         g_det_orig = 0.0
