@@ -7,12 +7,17 @@ import bpy
 from . import actors
 
 
-class SYMDRIVE_PT_main(bpy.types.Panel):
-    bl_label = "SymDrive"
-    bl_idname = "SYMDRIVE_PT_main"
+class _Sidebar:
+    """Where every SymDrive panel lives: the 3D viewport's sidebar, tab "SymDrive"."""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "SymDrive"
+
+
+class SYMDRIVE_PT_main(_Sidebar, bpy.types.Panel):
+    bl_label = "SymDrive"
+    bl_idname = "SYMDRIVE_PT_main"
 
     def draw(self, context):
         layout = self.layout
@@ -24,12 +29,9 @@ class SYMDRIVE_PT_main(bpy.types.Panel):
         layout.prop(settings, "background")
 
 
-class SYMDRIVE_PT_object(bpy.types.Panel):
+class SYMDRIVE_PT_object(_Sidebar, bpy.types.Panel):
     bl_label = "Selected"
     bl_parent_id = "SYMDRIVE_PT_main"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "SymDrive"
 
     @classmethod
     def poll(cls, context):
@@ -59,12 +61,9 @@ class SYMDRIVE_PT_object(bpy.types.Panel):
             layout.prop(ob.symdrive, "export", text="Export this camera")
 
 
-class SYMDRIVE_PT_trajectory(bpy.types.Panel):
+class SYMDRIVE_PT_trajectory(_Sidebar, bpy.types.Panel):
     bl_label = "Trajectory"
     bl_parent_id = "SYMDRIVE_PT_main"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "SymDrive"
 
     def draw(self, context):
         layout = self.layout
@@ -79,12 +78,9 @@ class SYMDRIVE_PT_trajectory(bpy.types.Panel):
         col.operator("symdrive.import_sumo_fcd", icon="FILE_SCRIPT")
 
 
-class SYMDRIVE_PT_export(bpy.types.Panel):
+class SYMDRIVE_PT_export(_Sidebar, bpy.types.Panel):
     bl_label = "Export"
     bl_parent_id = "SYMDRIVE_PT_main"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "SymDrive"
 
     def draw(self, context):
         layout = self.layout

@@ -183,9 +183,9 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
     from tqdm import tqdm
 
     from .. import conventions
-    from ..io.images import read_image, write_image
+    from ..io.images import write_image
     from .data import SplatRenderer
-    from .restore import Camera, LateralChain
+    from .restore import LateralChain
 
     cam = manifest.cameras[0]
     frames = args.frames if args.frames is not None else list(range(len(cam.frames)))
@@ -194,13 +194,7 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
     views = []
     for fi in tqdm(frames, desc="restore", unit="frame"):
         cf = cam.frames[fi]
-        chain = LateralChain(
-            restorer,
-            render,
-            read_image(manifest.resolve(cf.image), channels=3),
-            Camera(cf.K, cf.camera_to_world, cam.width, cam.height),
-            sampler,
-        )
+        chain = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
         for off in offsets:
             rel = f"{off:+.2f}/{fi:06d}.png"
             write_image(args.out / rel, chain.restore(off, args.step))

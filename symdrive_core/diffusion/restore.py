@@ -77,6 +77,14 @@ class LateralChain:
         self._restored: dict[tuple[float, float], np.ndarray] = {}
         self.samples = 0
 
+    @classmethod
+    def for_frame(cls, manifest: Manifest, cam, frame: int, restorer, render: SplatRenderer,
+                  sampler: SamplerConfig = DEFAULT) -> LateralChain:
+        """The chain around recorded frame ``frame`` of the package's camera ``cam``."""
+        cf = cam.frames[frame]
+        return cls(restorer, render, read_image(manifest.resolve(cf.image), channels=3),
+                   Camera(cf.K, cf.camera_to_world, cam.width, cam.height), sampler)
+
     def raw(self, offset: float) -> np.ndarray:
         key = round(offset, 6)
         if key not in self._renders:
@@ -157,14 +165,7 @@ def run_lateral_restoration(
         by_frame.setdefault(v.frame, []).append(v)
     bar = tqdm(total=len(targets) * len(methods), desc="restore", unit="view", disable=not progress)
     for fi, views in sorted(by_frame.items()):
-        cf = cam.frames[fi]
-        chain = LateralChain(
-            restorer,
-            render,
-            read_image(manifest.resolve(cf.image), channels=3),
-            Camera(cf.K, cf.camera_to_world, cam.width, cam.height),
-            sampler,
-        )
+        chain = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
         for v in sorted(views, key=lambda v: abs(v.offset_m)):
             gt = read_image(manifest.resolve(v.image), channels=3)
             for method, step in steps.items():
