@@ -13,13 +13,15 @@ MESH_SUFFIXES = {".obj", ".ply", ".glb", ".gltf"}
 
 
 def is_splat_ply(path: Path) -> bool:
-    """True when ``path`` is a PLY whose vertices carry 3DGS fields (checked from the header)."""
+    """True when ``path`` is a PLY whose vertices carry 3DGS fields, plain or compressed
+    (checked from the header)."""
     if path.suffix.lower() != ".ply":
         return False
     header = ply.read_header(path)
     vertex = header.element("vertex")
     names = {n for n, _ in vertex.properties} if vertex is not None else set()
-    return {"f_dc_0", "opacity", "rot_0"} <= names
+    return {"f_dc_0", "opacity", "rot_0"} <= names or ply.compressed_ply.is_compressed(
+        [e.name for e in header.elements], names)
 
 
 def import_mesh(path: Path, up_axis: str = "Z") -> list[bpy.types.Object]:

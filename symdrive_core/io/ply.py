@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..gaussians import Gaussians, sh_coeff_count
+from . import compressed_ply
 from .atomic import atomic_path
 
 _PLY_TYPES = {
@@ -105,26 +106,36 @@ def _read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
         raise InputError(path, "list properties in the vertex element are not supported", "element vertex")
     if header.fmt == "ascii":
         return _read_ascii_vertices(path, header, vertex)
+    return _read_binary_tables(path, header, ("vertex",))["vertex"]
+
+
+def _read_binary_tables(path: Path, header: PlyHeader, wanted: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The tables of the elements named ``wanted`` of a binary PLY, in native byte order."""
+    tables: dict[str, np.ndarray] = {}
     offset = header.data_offset
+    size = path.stat().st_size
     for el in header.elements:
-        if el is vertex:
+        if len(tables) == len(wanted):
             break
         if el.has_lists:
-            raise InputError(path, f"element '{el.name}' with list properties precedes the vertices", "header")
-        offset += el.count * np.dtype([(n, header.fmt + t) for n, t in el.properties]).itemsize
-    dtype = np.dtype([(n, header.fmt + t) for n, t in vertex.properties])
-    need = offset + vertex.count * dtype.itemsize
-    size = path.stat().st_size
-    if size < need:
-        have = max(0, (size - offset) // dtype.itemsize)
-        raise InputError(
-            path,
-            f"truncated: header declares {vertex.count} vertices ({need} bytes with the header) "
-            f"but the file has {size} bytes (room for {have} vertices)",
-            "element vertex",
-        )
-    table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=offset)
-    return table if dtype.isnative else table.astype(dtype.newbyteorder("="))
+            raise InputError(path, f"element '{el.name}' has list properties, which splat files do not use",
+                             f"element {el.name}")
+        dtype = np.dtype([(n, header.fmt + t) for n, t in el.properties])
+        need = offset + el.count * dtype.itemsize
+        if el.name in wanted:
+            if size < need:
+                have = max(0, (size - offset) // max(dtype.itemsize, 1))
+                rows = "vertices" if el.name == "vertex" else f"'{el.name}' rows"
+                raise InputError(
+                    path,
+                    f"truncated: header declares {el.count} {rows} ({need} bytes with the header) "
+                    f"but the file has {size} bytes (room for {have} {rows})",
+                    f"element {el.name}",
+                )
+            table = np.fromfile(path, dtype=dtype, count=el.count, offset=offset)
+            tables[el.name] = table if dtype.isnative else table.astype(dtype.newbyteorder("="))
+        offset = need
+    return tables
 
 
 def _read_ascii_vertices(path: Path, header: PlyHeader, vertex: _Element) -> np.ndarray:
@@ -182,6 +193,11 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
     header = read_header(path)
     table = _read_vertex_table(path, header)
     names = list(table.dtype.names or ())
+    if compressed_ply.is_compressed([e.name for e in header.elements], names):
+        if header.fmt == "ascii":
+            raise InputError(path, "compressed splat files are binary; this one says ascii", "header.format")
+        wanted = ("chunk", "vertex", "sh") if header.element("sh") else ("chunk", "vertex")
+        return _checked(path, compressed_ply.decode(path, _read_binary_tables(path, header, wanted)), drop_invalid)
     missing = [n for n in REQUIRED if n not in names]
     if missing:
         kind = "not a 3DGS splat file" if len(missing) > 3 else "missing required property"
@@ -214,11 +230,16 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
         normals=normals,
         extra=extra,
     )
+    return _checked(path, g, drop_invalid)
+
+
+def _checked(path: Path, g: Gaussians, drop_invalid: bool) -> Gaussians:
+    """``g`` without non-finite splats, or an error naming how many there are."""
     ok = g.finite_mask()
-    bad = int(n - ok.sum())
+    bad = int(len(g) - ok.sum())
     if bad:
         if not drop_invalid:
-            raise InputError(path, f"{bad} of {n} splats have NaN or Inf values "
+            raise InputError(path, f"{bad} of {len(g)} splats have NaN or Inf values "
                                    "(use --drop-invalid to drop them)", "element vertex")
         g = g.subset(ok)
     return g

@@ -3,6 +3,7 @@ import pytest
 
 from symdrive_core.gaussians import SH_C0
 from symdrive_core.io.ply import write_splats
+from tests.compressed_ply_files import BOX, pack_11_10_11, write_compressed_ply
 from tests.conftest import random_gaussians
 
 pytestmark = pytest.mark.blender
@@ -62,6 +63,17 @@ def test_subsampled_display_keeps_the_file_count(blender, tmp_path):
         100,
         100,
     )
+
+
+def test_compressed_ply_imports_as_splats(blender, tmp_path):
+    path = tmp_path / "scene.compressed.ply"
+    write_compressed_ply(path, [BOX, BOX], [(pack_11_10_11(2047, 0, 0), 0, 0, 0xFF0000FF)] * 300)
+    assert blender.ops.symdrive.import_splats(filepath=str(path)) == {"FINISHED"}
+    obj = blender.context.active_object
+    assert (obj.symdrive.role, obj.symdrive.splat_count, obj.symdrive.sh_degree) == ("SPLATS", 300, 0)
+    co = np.empty(len(obj.data.vertices) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    np.testing.assert_allclose(co.reshape(-1, 3), [[2.0, 0.0, 0.0]] * 300)
 
 
 def test_non_3dgs_ply_is_reported_not_raised_as_a_traceback(blender, tmp_path):
