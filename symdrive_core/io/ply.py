@@ -2,7 +2,8 @@
 
 Reads binary little/big-endian and ascii; SH degree 0..3 is inferred from the number of
 ``f_rest_*`` properties (stored channel-major: all of red's higher coefficients, then green's,
-then blue's). Properties the format does not define are kept in ``Gaussians.extra``. numpy only.
+then blue's). Properties the format does not define are kept in ``Gaussians.extra``. Compressed
+files (``chunk`` + packed ``vertex``) are decoded by :mod:`.compressed_ply`. numpy only.
 """
 
 from __future__ import annotations
