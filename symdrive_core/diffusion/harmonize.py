@@ -50,11 +50,13 @@ def harmonize(
     seed: int = 0,
     jump_length: int = 0,
     resamples: int = 1,
+    samples: int = 1,
 ) -> np.ndarray:
     """Harmonize ``image`` [H, W, 3] in [0, 1] inside ``region`` [H, W] (bool); a new array.
 
     ``n_start`` > 0 starts from the inserted render noised to that step, which keeps the
-    vehicle's shape while re-drawing its shading.
+    vehicle's shape while re-drawing its shading. ``samples`` > 1 averages that many
+    independent harmonizations (one batch), as ``SamplerConfig.samples`` does for restoration.
     """
     image = np.asarray(image)
     region = np.asarray(region, dtype=bool)
@@ -64,7 +66,7 @@ def harmonize(
         return image.copy()
     lat = restorer.latent
     x = to_tensor(image)
-    x0 = lat.encode(x)
+    x0 = lat.encode(x).repeat_interleave(max(1, int(samples)), dim=0)
     m = (
         latent_mask(torch.from_numpy(region)[None, None].float(), lat.factor)[
             ..., : x0.shape[-2], : x0.shape[-1]
@@ -85,9 +87,9 @@ def harmonize(
             z = flow.renoise(z, float(ts[i]), float(ts[j]), g)
             continue
         t, s = float(ts[i]), float(ts[j])
-        z = z + (s - t) * restorer.velocity(z, torch.full((1,), t, dtype=z.dtype), x0, x0)
+        z = z + (s - t) * restorer.velocity(z, torch.full((z.shape[0],), t, dtype=z.dtype), x0, x0)
         z = reset(z, j)
-    out = lat.decode(z)[0].permute(1, 2, 0).cpu().numpy()
+    out = lat.decode(z).mean(dim=0).permute(1, 2, 0).cpu().numpy()
     result = image.copy()
     result[region] = out[region].astype(image.dtype)
     return result

@@ -2,7 +2,8 @@
 
 The reconstruction is fine-tuned on its recorded views with ``L1 + lambda (1 - SSIM) +
 w * depth`` and on restored views with ``L1 + lambda (1 - SSIM)`` (no depth: a restored image
-carries none), one of each per iteration. No densification: refinement corrects colours and
+carries none), one of each per iteration. With no restored views it trains on the recorded
+ones alone: the control that tells what the restored views add. No densification: refinement corrects colours and
 positions of the Gaussians the reconstruction already has, and the position learning rate is
 the reconstruction's final (smallest) one so the geometry fitted to the recorded views does not
 drift toward hallucinated detail.
@@ -38,7 +39,8 @@ def refine_gaussians(
     *,
     progress: bool = True,
 ) -> tuple[Gaussians, dict]:
-    """Fine-tune ``gaussians`` on the package's training views plus ``restored``; (result, stats)."""
+    """Fine-tune ``gaussians`` on the package's training views plus ``restored`` (may be empty:
+    the control); (result, stats). The recorded views are drawn in the same order either way."""
     from tqdm import tqdm
 
     from ..optim.losses import photometric
@@ -55,8 +57,6 @@ def refine_gaussians(
     from ..world.package import split_frames
 
     cfg = cfg or RefineConfig()
-    if not restored:
-        raise ValueError("refine_gaussians needs at least one restored view")
     gt_views = load_views(manifest, split_frames(manifest)[0], depth=cfg.depth_weight > 0)
     extent, _ = scene_extent(gt_views)
     rc = ReconstructConfig()
@@ -75,11 +75,11 @@ def refine_gaussians(
         )
         for v in restored
     ]
-    rng = np.random.default_rng(cfg.seed)
+    rng_recorded, rng_restored = (np.random.default_rng([cfg.seed, k]) for k in (0, 1))
     first = last = None
     t0 = time.perf_counter()
     for _ in tqdm(range(cfg.iters), desc="refine", unit="it", disable=not progress):
-        gv = gt_views[rng.integers(len(gt_views))]
+        gv = gt_views[rng_recorded.integers(len(gt_views))]
         rgb, alpha, info = render(
             params,
             gv.K,
@@ -94,9 +94,10 @@ def refine_gaussians(
             dl = depth_loss(info, alpha, gv.depth)
             if dl is not None:
                 loss = loss + cfg.depth_weight * dl
-        K, viewmat, image, w, h = novel[rng.integers(len(novel))]
-        rgb, _, _ = render(params, K, viewmat, w, h, gaussians.sh_degree)
-        loss = loss + cfg.novel_weight * photometric(rgb, image, cfg.ssim_lambda)
+        if novel:
+            K, viewmat, image, w, h = novel[rng_restored.integers(len(novel))]
+            rgb, _, _ = render(params, K, viewmat, w, h, gaussians.sh_degree)
+            loss = loss + cfg.novel_weight * photometric(rgb, image, cfg.ssim_lambda)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

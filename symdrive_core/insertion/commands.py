@@ -20,6 +20,7 @@ def add_commands(sub) -> None:
     p.add_argument("--background", required=True, help="background splat PLY (the reconstruction)")
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
     p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
+    p.add_argument("--harmonize-samples", type=int, help="harmonizations averaged per frame (default 4)")
     p.add_argument("--finetune-steps", type=int, default=300)
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
@@ -58,9 +59,10 @@ def _insert_eval(args) -> int:
     harmonizer = None
     if not args.no_harmonize:
         from ..diffusion.models import load_restorer
-        from .harmonizer import restorer_harmonizer
+        from .harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
 
-        harmonizer = restorer_harmonizer(load_restorer(), steps=args.steps)
+        harmonizer = restorer_harmonizer(load_restorer(), steps=args.steps,
+                                         samples=args.harmonize_samples or DEFAULT_SAMPLES)
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_steps),
                           assets_out=Path(args.assets_out) if args.assets_out else None)
     details: dict = {}

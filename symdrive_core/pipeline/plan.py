@@ -78,11 +78,12 @@ class Plan:
 
 
 def sh_degree_of(path: Path) -> int:
-    """SH degree from a PLY header alone (count of f_rest_* properties), without reading data."""
+    """SH degree from a PLY header alone (count of f_rest_* properties, in ``vertex`` or, in a
+    compressed file, ``sh``), without reading data."""
     header = read_header(path)
-    vertex = header.element("vertex")
-    n_rest = sum(1 for name, _ in (vertex.properties if vertex else []) if name.startswith("f_rest_"))
-    return int(round(np.sqrt(n_rest // 3 + 1))) - 1
+    n_rest = sum(1 for el in header.elements if el.name in ("vertex", "sh")
+                 for name, _ in el.properties if name.startswith("f_rest_"))
+    return round(np.sqrt(n_rest // 3 + 1)) - 1
 
 
 def actor_local_box(manifest: Manifest, actor) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,19 @@
 """Scene packages: manifest (versioned, validated), cameras, poses and trajectories. numpy only."""
 
-from .manifest import (Actor, Camera, CameraFrame, Effects, Frame, IdMap, Manifest, ManifestError, MaskEntry,
-                       check_files, load_manifest, parse_manifest)
+from .manifest import (
+    Actor,
+    Camera,
+    CameraFrame,
+    Effects,
+    Frame,
+    IdMap,
+    Manifest,
+    ManifestError,
+    MaskEntry,
+    check_files,
+    load_manifest,
+    parse_manifest,
+)
 from .poses import Pose, interpolate_pose, matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
 from .visibility import box_corners_world, box_in_frustum, vehicle_local_box
 

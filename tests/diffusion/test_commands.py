@@ -82,7 +82,8 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     )
     rows = json.loads((out / "metrics.json").read_text())["lateral"]
     assert {(r["offset_m"], r["method"]) for r in rows} == {
-        (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "refined")
+        (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "refined",
+                                        "refined_recorded_only")
     }
     assert all(r["frames"] == 3 and 0 < r["ssim"] <= 1 for r in rows)
     assert (out / "refined.ply").exists()

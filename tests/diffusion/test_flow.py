@@ -88,3 +88,25 @@ def test_training_times_cover_the_sampled_range():
     share_above = float((t > 0.8).float().mean())
     assert 0.005 < share_above < 0.04  # ~10% drawn on [0, 1], a fifth of them above 0.8
     assert float((flow.training_times(4000, g, t_max=0.8) > 0.8).float().sum()) == 0.0
+
+
+def test_averaged_samples_land_on_the_data_with_the_exact_velocity():
+    g = torch.Generator().manual_seed(2)
+    y, init = torch.rand(1, 3, 8, 12, generator=g), torch.rand(1, 3, 8, 12, generator=g)
+    out = restore_image(OracleRestorer(y), init, init, init, SamplerConfig(steps=5, n_start=4, samples=6))
+    assert out.shape == y.shape and torch.allclose(out, y, atol=1e-5)
+
+
+def test_averaging_k_samples_divides_the_seed_variance_by_about_k():
+    """The mean of K samples estimates the posterior mean: its spread over seeds shrinks like 1/K."""
+    model = tiny_builtin(seed=1)
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(1, 3, 16, 16, generator=g), torch.rand(1, 3, 16, 16, generator=g)
+
+    def spread(samples: int) -> float:
+        outs = torch.cat([restore_image(model, a, b, a, SamplerConfig(steps=5, n_start=2, seed=s, samples=samples))
+                          for s in range(12)])
+        return float(outs.var(dim=0).mean())
+
+    ratio = spread(1) / spread(8)
+    assert 4.0 < ratio < 16.0

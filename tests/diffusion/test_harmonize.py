@@ -40,8 +40,8 @@ def test_moves_with_jumps_end_at_zero_noise_and_resample_each_jump_point(steps, 
     assert sum(1 for m in moves if m[1] > m[0]) == steps - start + len(ups) * jump
 
 
-@pytest.mark.parametrize("jump,resamples,n_start", [(0, 1, 0), (0, 1, 4), (3, 3, 2)])
-def test_background_comes_back_bit_identical(jump, resamples, n_start):
+@pytest.mark.parametrize("jump,resamples,n_start,samples", [(0, 1, 0, 1), (0, 1, 4, 1), (3, 3, 2, 1), (0, 1, 2, 3)])
+def test_background_comes_back_bit_identical(jump, resamples, n_start, samples):
     image, region = scene()
     out = harmonize(
         tiny_builtin(),
@@ -52,6 +52,7 @@ def test_background_comes_back_bit_identical(jump, resamples, n_start):
         seed=3,
         jump_length=jump,
         resamples=resamples,
+        samples=samples,
     )
     assert out.dtype == image.dtype
     assert np.array_equal(out[~region], image[~region])

@@ -39,3 +39,11 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
     after = np.mean([r["psnr"] for r in score_gaussians(manifest, refined, "refined")])
     assert after > before + 1.0
     assert stats["restored_views"] == len(views) and stats["loss_last"] < stats["loss_first"]
+
+    # the control (recorded views only, same draws of them) gains less where only lateral views look
+    control, control_stats = refine_gaussians(
+        manifest, damaged, [], RefineConfig(iters=40, depth_weight=0.0), progress=False
+    )
+    assert control_stats["restored_views"] == 0
+    control_psnr = np.mean([r["psnr"] for r in score_gaussians(manifest, control, "control")])
+    assert control_psnr < after

@@ -114,3 +114,13 @@ def test_plan_command_json(make_package, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["needs_diffusion"] is True
     assert [s["name"] for s in data["stages"]][:3] == ["reconstruct", "render", "restore"]
+
+
+def test_sh_degree_of_a_compressed_ply_comes_from_its_sh_element(tmp_path):
+    from tests.compressed_ply_files import BOX, write_compressed_ply
+
+    path = tmp_path / "car.compressed.ply"
+    write_compressed_ply(path, [BOX], [(0, 0, 0, 0)])
+    assert sh_degree_of(path) == 0
+    write_compressed_ply(path, [BOX], [(0, 0, 0, 0)], sh=np.zeros((1, 24), np.uint8))
+    assert sh_degree_of(path) == 2
