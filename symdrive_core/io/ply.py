@@ -2,7 +2,8 @@
 
 Reads binary little/big-endian and ascii; SH degree 0..3 is inferred from the number of
 ``f_rest_*`` properties (stored channel-major: all of red's higher coefficients, then green's,
-then blue's). Properties the format does not define are kept in ``Gaussians.extra``. Compressed
+then blue's). Properties the format does not define are kept in ``Gaussians.extra``; Mip-Splatting's
+``filter_3D`` is folded into scales and opacities (:func:`fold_3d_filter`). Compressed
 files (``chunk`` + packed ``vertex``) are decoded by :mod:`.compressed_ply`. numpy only.
 """
 
@@ -31,6 +32,8 @@ REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _KNOWN = set(REQUIRED) | {"nx", "ny", "nz"}
 _F_REST = re.compile(r"^f_rest_(\d+)$")
+# Mip-Splatting's 3D smoothing filter (per-Gaussian std. dev. in world units), by either spelling.
+_FILTER_3D = ("filter_3D", "filter_3d")
 
 
 @dataclass
@@ -221,17 +224,46 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
         sh[:, 1:, :] = rest.transpose(0, 2, 1)
     normals = _stack(table, ["nx", "ny", "nz"]) if {"nx", "ny", "nz"} <= set(names) else None
     extra = {nm: np.ascontiguousarray(table[nm]) for nm in names
-             if nm not in _KNOWN and not _F_REST.match(nm)}
+             if nm not in _KNOWN and nm not in _FILTER_3D and not _F_REST.match(nm)}
+    log_scales = _stack(table, ["scale_0", "scale_1", "scale_2"])
+    opacity_logits = np.ascontiguousarray(table["opacity"], dtype=np.float32)
+    filter_name = next((nm for nm in _FILTER_3D if nm in names), None)
+    if filter_name:
+        log_scales, opacity_logits = fold_3d_filter(log_scales, opacity_logits, table[filter_name])
     g = Gaussians(
         means=_stack(table, ["x", "y", "z"]),
         quats=_stack(table, ["rot_0", "rot_1", "rot_2", "rot_3"]),
-        log_scales=_stack(table, ["scale_0", "scale_1", "scale_2"]),
-        opacity_logits=np.ascontiguousarray(table["opacity"], dtype=np.float32),
+        log_scales=log_scales,
+        opacity_logits=opacity_logits,
         sh=sh,
         normals=normals,
         extra=extra,
     )
     return _checked(path, g, drop_invalid)
+
+
+def fold_3d_filter(log_scales: np.ndarray, opacity_logits: np.ndarray,
+                   filter_3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bake Mip-Splatting's 3D smoothing filter into plain 3DGS parameters.
+
+    Its renderer convolves each Gaussian with an isotropic one of std. dev. ``filter_3d`` and
+    keeps the integral: scales become sqrt(s^2 + f^2) and opacity is multiplied by
+    sqrt(det(S^2) / det(S^2 + f^2)). Rendering the folded splats with any 3DGS renderer gives
+    the image Mip-Splatting's own renderer gives; reading the file raw would not.
+    """
+    # All in log space, so that tiny and huge scales and saturated opacities stay finite.
+    log_s2 = 2.0 * log_scales.astype(np.float64)
+    with np.errstate(divide="ignore"):  # f = 0 is no filter: log 0 = -inf folds to nothing
+        log_f2 = 2.0 * np.log(np.abs(np.asarray(filter_3d, dtype=np.float64))).reshape(-1, 1)
+    log_filtered = np.logaddexp(log_s2, log_f2)
+    log_coef = 0.5 * np.sum(log_s2 - log_filtered, axis=1)  # <= 0
+    o = opacity_logits.astype(np.float64)
+    log_alpha = -np.logaddexp(0.0, -o)
+    # log(1 - coef * alpha), written as log((1 - coef) + coef * (1 - alpha))
+    with np.errstate(divide="ignore"):
+        log_one_minus = np.logaddexp(np.log(-np.expm1(log_coef)), log_coef - np.logaddexp(0.0, o))
+    logits = log_coef + log_alpha - log_one_minus
+    return (0.5 * log_filtered).astype(np.float32), logits.astype(np.float32)
 
 
 def _checked(path: Path, g: Gaussians, drop_invalid: bool) -> Gaussians:

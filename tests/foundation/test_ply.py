@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 from plyfile import PlyData, PlyElement
 
 from symdrive_core.errors import InputError
-from symdrive_core.io.ply import REQUIRED, describe, read_splats, sh_rest_names, write_splats
+from symdrive_core.io.ply import REQUIRED, describe, fold_3d_filter, read_splats, sh_rest_names, write_splats
 from tests.conftest import random_gaussians
 
 
@@ -146,3 +146,31 @@ def test_activated_views():
     np.testing.assert_allclose(np.linalg.norm(g.unit_quats, axis=1), 1.0, rtol=1e-6)
     g.quats[0] = 0.0
     np.testing.assert_array_equal(g.unit_quats[0], [1, 0, 0, 0])
+
+
+def test_mip_splatting_3d_filter_is_folded_into_scales_and_opacity(tmp_path):
+    arr = _plyfile_write(tmp_path / "mip.ply", 6, 1, extra=("filter_3D",))
+    f = np.abs(arr["filter_3D"]).astype(np.float64)
+    g = read_splats(tmp_path / "mip.ply")
+    assert "filter_3D" not in g.extra  # folded, so a writer cannot apply it twice
+    s = np.exp(np.stack([arr[f"scale_{i}"] for i in range(3)], 1).astype(np.float64))
+    filtered = np.sqrt(s**2 + f[:, None] ** 2)  # Mip-Splatting: scales with the 3D filter
+    np.testing.assert_allclose(g.scales, filtered, rtol=1e-5)
+    alpha = 1 / (1 + np.exp(-arr["opacity"].astype(np.float64)))
+    coef = np.sqrt(np.prod(s**2, 1) / np.prod(filtered**2, 1))  # its opacity compensation
+    np.testing.assert_allclose(g.opacities, alpha * coef, rtol=1e-5)
+    # the convolution keeps each Gaussian's integral: opacity * sqrt(det covariance)
+    np.testing.assert_allclose(g.opacities * np.prod(g.scales, 1), alpha * np.prod(s, 1), rtol=1e-5)
+
+
+def test_3d_filter_fold_stays_finite_in_hard_cases():
+    log_scales = np.log(np.array([[1e-8, 1e-8, 1e-8], [1e4, 1e4, 1e4], [1.0, 1.0, 1e-30], [0.1, 0.2, 0.3]]))
+    logits = np.array([40.0, -40.0, 60.0, 40.0])
+    ls, lo = fold_3d_filter(log_scales.astype(np.float32), logits.astype(np.float32), np.array([0.01, 0.01, 0.5, 0.0]))
+    assert np.isfinite(ls).all() and np.isfinite(lo).all()
+    np.testing.assert_allclose(ls[0], np.log(0.01), rtol=1e-6)  # a tiny Gaussian becomes the filter
+    np.testing.assert_allclose(ls[1], log_scales[1], rtol=1e-6)  # a huge one is unchanged
+    np.testing.assert_allclose(lo[1], -40.0, rtol=1e-5)
+    assert lo[0] < -30  # its opacity drops by (1e-8 / 0.01)^3
+    np.testing.assert_array_equal(ls[3], log_scales[3].astype(np.float32))  # no filter: nothing changes
+    assert lo[3] == np.float32(40.0)
