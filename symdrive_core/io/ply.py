@@ -3,7 +3,8 @@
 Reads binary little/big-endian and ascii; SH degree 0..3 is inferred from the number of
 ``f_rest_*`` properties (stored channel-major: all of red's higher coefficients, then green's,
 then blue's). Properties the format does not define are kept in ``Gaussians.extra``; Mip-Splatting's
-``filter_3D`` is folded into scales and opacities (:func:`fold_3d_filter`). Compressed
+``filter_3D`` is folded into scales and opacities (:func:`fold_3d_filter`) and 2DGS surfels (two
+scales) become flat Gaussians. Compressed
 files (``chunk`` + packed ``vertex``) are decoded by :mod:`.compressed_ply`. numpy only.
 """
 
@@ -32,6 +33,8 @@ REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 _KNOWN = set(REQUIRED) | {"nx", "ny", "nz"}
 _F_REST = re.compile(r"^f_rest_(\d+)$")
+# 2DGS surfels store two scales; read as 3D Gaussians this much thinner than their smaller axis.
+SURFEL_THICKNESS = 1e-3
 # Mip-Splatting's 3D smoothing filter (per-Gaussian std. dev. in world units), by either spelling.
 _FILTER_3D = ("filter_3D", "filter_3d")
 
@@ -202,7 +205,8 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
             raise InputError(path, "compressed splat files are binary; this one says ascii", "header.format")
         wanted = ("chunk", "vertex", "sh") if header.element("sh") else ("chunk", "vertex")
         return _checked(path, compressed_ply.decode(path, _read_binary_tables(path, header, wanted)), drop_invalid)
-    missing = [n for n in REQUIRED if n not in names]
+    surfels = "scale_2" not in names and {"scale_0", "scale_1"} <= set(names)  # a 2DGS file
+    missing = [n for n in REQUIRED if n not in names and not (surfels and n == "scale_2")]
     if missing:
         kind = "not a 3DGS splat file" if len(missing) > 3 else "missing required property"
         raise InputError(path, f"{kind}: no {', '.join(missing)}", "element vertex")
@@ -225,7 +229,7 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
     normals = _stack(table, ["nx", "ny", "nz"]) if {"nx", "ny", "nz"} <= set(names) else None
     extra = {nm: np.ascontiguousarray(table[nm]) for nm in names
              if nm not in _KNOWN and nm not in _FILTER_3D and not _F_REST.match(nm)}
-    log_scales = _stack(table, ["scale_0", "scale_1", "scale_2"])
+    log_scales = _surfel_log_scales(table) if surfels else _stack(table, ["scale_0", "scale_1", "scale_2"])
     opacity_logits = np.ascontiguousarray(table["opacity"], dtype=np.float32)
     filter_name = next((nm for nm in _FILTER_3D if nm in names), None)
     if filter_name:
@@ -240,6 +244,13 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
         extra=extra,
     )
     return _checked(path, g, drop_invalid)
+
+
+def _surfel_log_scales(table: np.ndarray) -> np.ndarray:
+    """2DGS surfels as flat 3D Gaussians: a surfel's rotation columns are its two tangents and
+    its normal, the same order a 3DGS rotation's axes have, so only the normal's scale is new."""
+    two = _stack(table, ["scale_0", "scale_1"])
+    return np.concatenate([two, two.min(axis=1, keepdims=True) + np.float32(np.log(SURFEL_THICKNESS))], axis=1)
 
 
 def fold_3d_filter(log_scales: np.ndarray, opacity_logits: np.ndarray,

@@ -5,7 +5,15 @@ from hypothesis import strategies as st
 from plyfile import PlyData, PlyElement
 
 from symdrive_core.errors import InputError
-from symdrive_core.io.ply import REQUIRED, describe, fold_3d_filter, read_splats, sh_rest_names, write_splats
+from symdrive_core.io.ply import (
+    REQUIRED,
+    SURFEL_THICKNESS,
+    describe,
+    fold_3d_filter,
+    read_splats,
+    sh_rest_names,
+    write_splats,
+)
 from tests.conftest import random_gaussians
 
 
@@ -174,3 +182,15 @@ def test_3d_filter_fold_stays_finite_in_hard_cases():
     assert lo[0] < -30  # its opacity drops by (1e-8 / 0.01)^3
     np.testing.assert_array_equal(ls[3], log_scales[3].astype(np.float32))  # no filter: nothing changes
     assert lo[3] == np.float32(40.0)
+
+
+def test_2dgs_surfels_read_as_flat_gaussians(tmp_path):
+    arr = _plyfile_write(tmp_path / "surfels.ply", 5, 0, drop=("scale_2",))
+    g = read_splats(tmp_path / "surfels.ply")
+    np.testing.assert_allclose(g.log_scales[:, :2], np.stack([arr["scale_0"], arr["scale_1"]], 1))
+    thinnest = np.minimum(arr["scale_0"], arr["scale_1"]) + np.log(SURFEL_THICKNESS)
+    np.testing.assert_allclose(g.log_scales[:, 2], thinnest, rtol=1e-6)
+    # one scale alone is still an error naming what is missing
+    _plyfile_write(tmp_path / "one.ply", 5, 0, drop=("scale_1", "scale_2"))
+    with pytest.raises(InputError, match="scale_1"):
+        read_splats(tmp_path / "one.ply")
