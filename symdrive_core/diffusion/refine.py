@@ -3,10 +3,10 @@
 The reconstruction is fine-tuned on its recorded views with ``L1 + lambda (1 - SSIM) +
 w * depth`` and on restored views with ``L1 + lambda (1 - SSIM)`` (no depth: a restored image
 carries none), one of each per iteration. With no restored views it trains on the recorded
-ones alone: the control that tells what the restored views add. No densification: refinement corrects colours and
-positions of the Gaussians the reconstruction already has, and the position learning rate is
-the reconstruction's final (smallest) one so the geometry fitted to the recorded views does not
-drift toward hallucinated detail.
+ones alone: the control that tells what the restored views add. No densification: refinement
+corrects colours and positions of the Gaussians the reconstruction already has, and the
+position learning rate is the reconstruction's final (smallest) one so the geometry fitted to
+the recorded views does not drift toward hallucinated detail.
 """
 
 from __future__ import annotations
