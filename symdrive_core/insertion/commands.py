@@ -21,6 +21,7 @@ def add_commands(sub) -> None:
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
     p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
     p.add_argument("--harmonize-samples", type=int, help="harmonizations averaged per frame (default 4)")
+    p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
     p.add_argument("--finetune-steps", type=int, default=300)
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
@@ -61,7 +62,7 @@ def _insert_eval(args) -> int:
         from ..diffusion.models import load_restorer
         from .harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
 
-        harmonizer = restorer_harmonizer(load_restorer(), steps=args.steps,
+        harmonizer = restorer_harmonizer(load_restorer(weights=args.weights), steps=args.steps,
                                          samples=args.harmonize_samples or DEFAULT_SAMPLES)
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_steps),
                           assets_out=Path(args.assets_out) if args.assets_out else None)

@@ -2,7 +2,9 @@ import argparse
 import json
 
 import numpy as np
+import pytest
 
+from symdrive_core.errors import InputError
 from symdrive_core.insertion import commands
 from symdrive_core.io.images import read_image, read_mask
 
@@ -39,3 +41,26 @@ def test_insert_eval_baselines_to_json(tmp_path, capsys):
     assert args.func(args) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
     assert [r["method"] for r in rows] == ["naive", "color_transfer"]
+
+
+def test_insert_eval_harmonizes_with_the_weights_given(tmp_path):
+    import torch
+
+    from symdrive_core.diffusion.models import save_builtin
+    from symdrive_core.diffusion.unet import UNet, UNetConfig
+
+    path, _ = package.write_package(tmp_path / "pkg")
+    torch.manual_seed(0)
+    weights = save_builtin(tmp_path / "tiny.safetensors", UNet(UNetConfig(width=8, mults=(1, 2))))
+    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"),
+                   "--weights", str(weights), "--steps", "2", "--harmonize-samples", "2", "--finetune-steps", "2",
+                   "--json", str(tmp_path / "rows.json")])
+    assert args.func(args) == 0
+    rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
+    assert [r["method"] for r in rows] == ["naive", "color_transfer", "harmonized", "finetuned"]
+    assert all(np.isfinite(r["masked_psnr"]) for r in rows)
+    # a missing weights file is named, not replaced by the shipped one
+    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"),
+                   "--weights", str(tmp_path / "absent.safetensors")])
+    with pytest.raises(InputError, match="absent.safetensors"):
+        args.func(args)
