@@ -2,15 +2,15 @@
 # Reproduce the shipped restorer weights (symdrive_core/diffusion/weights/restorer.*):
 # render training pairs from the built-in street's SHIPPED reconstruction (the one restoration
 # runs on), from the package's training frames only (the held-out frames stay unseen), and
-# train on this CPU (about 20 minutes on one thread).
+# train on this CPU (about 23 minutes on two threads).
 #   scripts/train_restorer.sh [WORK_DIR]        (default: out/restorer-train)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${1:-out/restorer-train}
 PACKAGE=symdrive_core/data/demo_street
-export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1
+export NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=2
 
 symdrive make-pairs "$PACKAGE" --offsets 0.5,1,1.5,2,2.5,3 --out "$WORK/pairs.safetensors"
 # defaults: --output skip --t-max 0.85 --full-fraction 0.1 --batch 8 --crop 64 --lr 4e-4
-symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/run" --steps 3000 --ema 0.999 --seed 0 --threads 1
+symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/run" --steps 9000 --ema 0.999 --seed 0 --threads 2
 cp "$WORK/run/restorer.safetensors" "$WORK/run/restorer.json" symdrive_core/diffusion/weights/
