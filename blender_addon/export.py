@@ -237,6 +237,7 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                     finetune=inserted and scene.symdrive.finetune,
                     shadows=sun is not None,
                     sun_direction=sun,
+                    shadow_ratio=scene.symdrive.shadow_ratio if sun is not None else None,
                 ),
             )
             manifest.save(work / "manifest.json")

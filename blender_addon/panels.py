@@ -91,6 +91,7 @@ class SYMDRIVE_PT_export(_Sidebar, bpy.types.Panel):
             "lateral_offsets",
             "harmonize",
             "finetune",
+            "shadow_ratio",
             "write_masks",
             "copy_assets",
         ):

@@ -13,6 +13,8 @@ from bpy.props import (
     StringProperty,
 )
 
+from .core import scene as scene_pkg
+
 ROLES = [
     ("NONE", "None", "Not a SymDrive object"),
     ("SPLATS", "Splats", "A 3DGS splat cloud (background or part of a vehicle)"),
@@ -78,6 +80,14 @@ class SymDriveSceneSettings(bpy.types.PropertyGroup):
     )
     harmonize: BoolProperty(name="Harmonize inserted vehicles", default=True)
     finetune: BoolProperty(name="Fine-tune inserted vehicles", default=False)
+    shadow_ratio: FloatProperty(
+        name="Shadow ratio",
+        default=scene_pkg.DEFAULT_SHADOW_RATIO,
+        min=0.0,
+        max=1.0,
+        description="Fraction of its light the ground keeps in an inserted vehicle's shadow "
+        "(skylight over sun plus sky); used when the scene has a sun lamp",
+    )
     write_masks: BoolProperty(name="Render masks", default=True)
     copy_assets: BoolProperty(name="Copy assets into the package", default=False)
     curve: PointerProperty(name="Path curve", type=bpy.types.Object, poll=lambda self, ob: ob.type == "CURVE")

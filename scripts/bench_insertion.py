@@ -1,4 +1,4 @@
-"""Insertion benchmark: the four methods on held-out placements, harmonization time per frame,
+"""Insertion benchmark: every insertion method on held-out placements, harmonization time per frame,
 fine-tune time, and harmonization quality against sampler steps.
 
     python scripts/bench_insertion.py --package symdrive_core/data/demo_street \
@@ -22,7 +22,7 @@ def main(argv=None) -> int:
     p.add_argument("--package", required=True, type=Path)
     p.add_argument("--background", required=True, type=Path, help="background splat PLY (the reconstruction)")
     p.add_argument("--steps", type=int, nargs="*", default=[5, 10, 25, 50], help="sampler steps to sweep")
-    p.add_argument("--main-steps", type=int, help="steps for the full four-method run (default: the restorer's)")
+    p.add_argument("--main-steps", type=int, help="steps for the full run of every method (default: the restorer's)")
     p.add_argument("--finetune-steps", type=int, default=300)
     p.add_argument("--train-views", type=int, default=6)
     p.add_argument("--features-module", help="extractor for the Frechet distance (FILE.py:FN, MODULE:FN, .pt)")

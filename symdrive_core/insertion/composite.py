@@ -80,7 +80,7 @@ class InsertionView:
                 self.bg_opacities = torch.zeros(0, dtype=dtype)
             self.means2d = torch.cat([p.means2d[i] for p, i in parts])
             self.conics = torch.cat([p.conics[i] for p, i in parts])
-            depths = torch.cat([p.depths[i] for p, i in parts])
+            self.depths = depths = torch.cat([p.depths[i] for p, i in parts])
             radii = torch.cat([p.radii[i] for p, i in parts])
             nb = self.bg_colors.shape[0]
             self.groups = torch.cat([torch.full((nb,), -1, dtype=torch.int64),
@@ -107,6 +107,21 @@ class InsertionView:
         with torch.no_grad():
             rgb, _, va = self.render(torch.as_tensor(vehicle.sh), torch.as_tensor(vehicle.opacity_logits))
         return rgb.numpy().astype(np.float32), va.numpy().astype(np.float32)
+
+    def render_background_numpy(self) -> tuple[np.ndarray, np.ndarray]:
+        """The view without the vehicle: (rgb [H, W, 3], expected depth [H, W], 0 where empty).
+        The depth tells what a cast shadow may land on."""
+        nb = self.bg_colors.shape[0]
+        nv = self.means2d.shape[0] - nb
+        dtype = self.bg_colors.dtype
+        feats = torch.cat([torch.cat([self.bg_colors, self.depths[:nb, None]], 1), torch.zeros(nv, 4, dtype=dtype)])
+        opac = torch.cat([self.bg_opacities, torch.zeros(nv, dtype=dtype)])
+        with torch.no_grad():
+            rgbd, alpha, _ = RasterizePixels.apply(self.means2d, self.conics, opac, feats, self.groups, 1, self.bins,
+                                                   self.camera.width, self.camera.height, ALPHA_THRESHOLD)
+        rgb = rgbd[..., :3] + (1.0 - alpha[..., None]) * self.background_color
+        depth = torch.where(alpha > 0, rgbd[..., 3] / torch.clamp_min(alpha, 1e-12), torch.zeros_like(alpha))
+        return rgb.numpy().astype(np.float32), depth.numpy().astype(np.float32)
 
 
 def render_insertion(camera: CameraView, background: GaussianTensors | None, vehicle: Gaussians, pose: Pose,

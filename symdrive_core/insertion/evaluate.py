@@ -1,10 +1,12 @@
 """Insertion quality on held-out placements, against Cycles renders of the vehicle truly in the scene.
 
-Per placement: the studio-lit asset is inserted naively, colour-transferred (Reinhard),
-harmonized (RePaint with the restorer), and fine-tuned (colour/opacity only, on harmonized
-*training* views of the same parked vehicle; the held-out view is never seen). Masked metrics
-use the true vehicle mask ∪ its true shadow, the region where the real image differs from the
-empty scene; full-image PSNR also counts the background reconstruction's own error.
+Per placement: the studio-lit asset is inserted naively, colour-transferred (Reinhard), given
+its cast shadow (scenes with a sun), harmonized (RePaint with the restorer, on the insertion
+with its shadow), and fine-tuned (colour/opacity only, on harmonized *training* views of the
+same parked vehicle; the held-out view is never seen), then rendered as is and with its
+shadow. Masked metrics use the true vehicle mask ∪ its true shadow, the region where the real
+image differs from the empty scene; full-image PSNR also counts the background
+reconstruction's own error.
 """
 
 from __future__ import annotations
@@ -25,13 +27,14 @@ from ..scene import Manifest
 from ..world.package import split_frames
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
+from .cast_shadow import CastShadow, vehicle_shadow
 from .composite import CameraView, InsertionView
 from .features import crop_frechet, vehicle_crop
 from .harmonizer import Harmonizer, restorer_harmonizer
 from .placements import HeldOut, camera_view, held_out_placements, training_views
 from .shadow import dilate, harmonization_region, shadow_region
 
-METHODS = ("naive", "color_transfer", "harmonized", "finetuned")
+METHODS = ("naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow")
 
 
 @dataclass
@@ -46,35 +49,55 @@ class InsertionConfig:
 
 @dataclass
 class InsertedFrame:
-    image: np.ndarray  # naive insertion [H, W, 3]
+    image: np.ndarray  # the insertion as the scene calls for it: ``plain`` plus its cast shadow under a sun
+    plain: np.ndarray  # the naive render [H, W, 3]
     vehicle_alpha: np.ndarray  # [H, W]
     region: np.ndarray  # [H, W] bool: vehicle ∪ shadow region (what harmonization may change)
     view: InsertionView
+    shadow: CastShadow | None = None  # None: no sun, or shadows off
 
 
 def insert_frame(manifest: Manifest, background, vehicle: Gaussians, pose, wlh, camera: CameraView,
                  shadow_px: int = 3) -> InsertedFrame:
-    """Render one naive insertion and the region harmonization may change."""
+    """Render one insertion (with the shadow it casts where the scene has a sun) and the region
+    harmonization may change."""
     view = InsertionView(camera, background, vehicle, pose)
     rgb, alpha = view.render_numpy(vehicle)
     eff = manifest.effects
-    shadow = None
+    region, cast = None, None
     if eff.shadows and eff.sun_direction is not None:
-        shadow = shadow_region(pose, wlh, eff.sun_direction, camera.camera_to_world, camera.K, camera.width,
+        region = shadow_region(pose, wlh, eff.sun_direction, camera.camera_to_world, camera.K, camera.width,
                                camera.height, dilate_px=shadow_px)
-    return InsertedFrame(rgb, alpha, harmonization_region(alpha, shadow), view)
+        cast = vehicle_shadow(view, vehicle, pose, wlh, eff.sun_direction, eff.shade)
+    image = rgb if cast is None else cast.apply(rgb, alpha)
+    return InsertedFrame(image, rgb, alpha, harmonization_region(alpha, region), view, cast)
 
 
 def finetune_sample(frame: InsertedFrame, target: np.ndarray, background, vehicle: Gaussians,
                     cfg: InsertionConfig) -> FinetuneSample:
-    """The harmonized frame's window around the region, projected once for the fine-tune."""
+    """The harmonized frame's window around the region, projected once for the fine-tune. The
+    loss looks at the vehicle and a thin ring of background, minus the ring's shadowed pixels
+    (the fine-tune renders no shadow, and must not grow the car to imitate one)."""
     rows, cols = bbox_crop(frame.region, cfg.crop_margin)
     view = InsertionView(frame.view.camera.crop(rows, cols), background, vehicle, frame.view.pose)
-    mask = dilate(frame.vehicle_alpha > 0.01, cfg.loss_ring_px)[rows, cols].astype(np.float32)
+    on_car = frame.vehicle_alpha > 0.01
+    mask = dilate(on_car, cfg.loss_ring_px)
+    if frame.shadow is not None:
+        mask &= on_car | (frame.shadow.occlusion <= 0.01)
+    mask = mask[rows, cols].astype(np.float32)
     return FinetuneSample(view, np.ascontiguousarray(target[rows, cols]), mask)
 
 
-def _scores(pred, gt, mask) -> dict:
+def truth(manifest: Manifest, placement: HeldOut) -> tuple[np.ndarray, np.ndarray]:
+    """The Cycles image of the car truly in the scene, and the scored mask (car ∪ its shadow)."""
+    gt = read_image(manifest.resolve(placement.with_image), channels=3)
+    mask = read_mask(manifest.resolve(placement.mask)) > 0.5
+    if placement.shadow_mask:
+        mask |= read_mask(manifest.resolve(placement.shadow_mask)) > 0.5
+    return gt, mask
+
+
+def scores(pred, gt, mask) -> dict:
     return {"masked_psnr": psnr(pred, gt, mask), "masked_ssim": ssim(pred, gt, mask), "psnr": psnr(pred, gt)}
 
 
@@ -85,7 +108,9 @@ def evaluate_placement(manifest: Manifest, background, placement: HeldOut, harmo
     vehicle = asset.gaussians
     held = insert_frame(manifest, background, vehicle, placement.pose, placement.wlh, placement.camera,
                         cfg.shadow_dilate_px)
-    images = {"naive": naive(held.image), "color_transfer": reinhard_transfer(held.image, held.vehicle_alpha)}
+    images = {"naive": naive(held.plain), "color_transfer": reinhard_transfer(held.plain, held.vehicle_alpha)}
+    if held.shadow is not None:
+        images["cast_shadow"] = held.image
     if harmonizer is not None:
         t = time.perf_counter()
         images["harmonized"] = harmonizer(held.image, held.region)
@@ -102,14 +127,16 @@ def evaluate_placement(manifest: Manifest, background, placement: HeldOut, harmo
             res = finetune_colors(vehicle, samples, cfg.finetune, progress=progress)
             timings.setdefault("finetune_seconds", []).append(res.seconds)
             timings.setdefault("finetune_views", []).append(len(samples))
-            images["finetuned"] = held.view.render_numpy(res.gaussians)[0]
+            rgb, alpha = held.view.render_numpy(res.gaussians)
+            images["finetuned"] = rgb
+            if held.shadow is not None:  # the shadow of the fine-tuned opacities
+                cast = vehicle_shadow(held.view, res.gaussians, placement.pose, placement.wlh,
+                                      manifest.effects.sun_direction, held.shadow.ratio)
+                images["finetuned_shadow"] = cast.apply(rgb, alpha)
             if cfg.assets_out is not None:
                 write_splats(Path(cfg.assets_out) / f"{placement.index:02d}_{asset.name}.ply", res.gaussians)
-    gt = read_image(manifest.resolve(placement.with_image), channels=3)
-    mask = read_mask(manifest.resolve(placement.mask)) > 0.5
-    if placement.shadow_mask:
-        mask |= read_mask(manifest.resolve(placement.shadow_mask)) > 0.5
-    return {"scores": {m: _scores(img, gt, mask) for m, img in images.items()},
+    gt, mask = truth(manifest, placement)
+    return {"scores": {m: scores(img, gt, mask) for m, img in images.items()},
             "crops": {m: vehicle_crop(img, mask) for m, img in images.items()} | {"real": vehicle_crop(gt, mask)}}
 
 

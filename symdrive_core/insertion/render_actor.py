@@ -1,8 +1,9 @@
 """Render one inserted actor along its trajectory: image, vehicle mask and harmonization region.
 
-Outputs under ``out``: ``<camera>/<frame>.png`` (naive insertion), ``<camera>/<frame>.mask.png``
-(the vehicle's accumulated alpha) and ``<camera>/<frame>.region.png`` (vehicle ∪ shadow region,
-what harmonization may change). Frames where the actor is absent or outside the frustum are
+Outputs under ``out``: ``<camera>/<frame>.png`` (the insertion, with its cast shadow where the
+scene has a sun), ``<camera>/<frame>.mask.png`` (the vehicle's accumulated alpha),
+``<camera>/<frame>.shadow.png`` (how much sun it blocks, sunny scenes only) and
+``<camera>/<frame>.region.png`` (vehicle ∪ shadow region, what harmonization may change). Frames where the actor is absent or outside the frustum are
 skipped; every file is written atomically.
 """
 
@@ -52,5 +53,7 @@ def insert_actor(manifest: Manifest, actor_id: str, out, *, background=None, fli
         base = out / cam.name / f"{fi:06d}"
         write_mask(base.with_suffix(".mask.png"), frame.vehicle_alpha)
         write_mask(base.with_suffix(".region.png"), frame.region.astype("float32"))
+        if frame.shadow is not None:
+            write_mask(base.with_suffix(".shadow.png"), frame.shadow.occlusion)
         write_image(base.with_suffix(".png"), frame.image)
     return len(jobs)

@@ -39,6 +39,11 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     return np.asarray(lower[:-1] + upper[:-1], dtype=np.float64)
 
 
+def vehicle_ground_z(pose: Pose, wlh) -> float:
+    """Height of the ground a vehicle stands on: the bottom of its box at ``pose``."""
+    return float(pose.apply(conventions.vehicle_box_corners(wlh))[:, 2].min())
+
+
 def shadow_polygon(pose: Pose, wlh, sun_direction, ground_z: float | None = None) -> np.ndarray | None:
     """Ground-plane hull [M, 2] (world x, y) of the box's shadow, None when the sun is down."""
     s = np.asarray(sun_direction, dtype=np.float64)
@@ -46,7 +51,7 @@ def shadow_polygon(pose: Pose, wlh, sun_direction, ground_z: float | None = None
     if s[2] > -MIN_SUN_ELEVATION_SIN:  # light travelling upwards or grazing: no ground shadow
         return None
     corners = pose.apply(conventions.vehicle_box_corners(wlh))
-    gz = float(corners[:, 2].min()) if ground_z is None else float(ground_z)
+    gz = vehicle_ground_z(pose, wlh) if ground_z is None else float(ground_z)
     t = (gz - corners[:, 2]) / s[2]
     on_ground = corners + np.clip(t, 0.0, None)[:, None] * s
     return convex_hull(np.concatenate([corners[:, :2], on_ground[:, :2]]))
@@ -100,7 +105,7 @@ def shadow_region(pose: Pose, wlh, sun_direction, c2w: np.ndarray, K: np.ndarray
     hull = shadow_polygon(pose, wlh, sun_direction, ground_z)
     if hull is None or len(hull) < 3:
         return None
-    gz = float(pose.apply(conventions.vehicle_box_corners(wlh))[:, 2].min()) if ground_z is None else ground_z
+    gz = vehicle_ground_z(pose, wlh) if ground_z is None else ground_z
     xy, hit = ground_hits(c2w, K, width, height, gz)
     return dilate(hit & inside_convex(xy, hull), dilate_px)
 

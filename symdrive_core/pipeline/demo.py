@@ -103,10 +103,12 @@ def _lateral_plot(path: Path, rows: list[dict]) -> Path:
 
 
 def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progress: bool = True) -> list[Path]:
-    """Drive ``vehicle`` along the road in front of the recorded camera and render every frame."""
+    """Drive ``vehicle`` along the road in front of the recorded camera and render every frame
+    (with its cast shadow where the scene has a sun)."""
     from tqdm import tqdm
 
-    from ..insertion.composite import CameraView, render_insertion
+    from ..insertion.composite import CameraView
+    from ..insertion.evaluate import insert_frame
     from ..io.images import write_image
 
     cam = manifest.cameras[0]
@@ -114,9 +116,9 @@ def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progres
     for fi, pose in enumerate(tqdm(road_trajectory(manifest, float(wlh[2])), desc="trajectory", unit="frame",
                                    disable=not progress)):
         cf = cam.frames[fi]
-        rgb, _ = render_insertion(CameraView(cf.world_to_camera, cf.K, cam.width, cam.height), background,
-                                  vehicle, pose)
-        paths.append(write_image(out_dir / f"{fi:06d}.png", rgb))
+        frame = insert_frame(manifest, background, vehicle, pose, wlh,
+                             CameraView(cf.world_to_camera, cf.K, cam.width, cam.height))
+        paths.append(write_image(out_dir / f"{fi:06d}.png", frame.image))
     return paths
 
 
@@ -160,17 +162,17 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dic
     placements = held_out_placements(manifest)
     finetuned = sorted((out / "insertion_assets").glob("*.ply"))
     if placements and finetuned:
-        from ..insertion.composite import render_insertion
+        from ..insertion.evaluate import insert_frame
 
         p = placements[0]
         bg_t = GaussianTensors.from_gaussians(background)
         asset = load_vehicle_asset(manifest.resolve(p.asset))
-        panels = [("naive insertion", render_insertion(p.camera, bg_t, asset.gaussians, p.pose)[0])]
+        panels = [("naive insertion", insert_frame(manifest, bg_t, asset.gaussians, p.pose, p.wlh, p.camera).plain)]
         harmonized = output_path(out, "harmonize", p.camera_name, p.frame)
         if harmonized.exists():
             panels.append(("harmonized (RePaint)", read_image(harmonized, channels=3)))
-        panels += [("fine-tuned asset (held-out view)", render_insertion(p.camera, bg_t, read_splats(finetuned[0]),
-                                                                         p.pose)[0]),
+        tuned = insert_frame(manifest, bg_t, read_splats(finetuned[0]), p.pose, p.wlh, p.camera)
+        panels += [("fine-tuned asset" + (" + shadow" if tuned.shadow is not None else ""), tuned.image),
                    ("Cycles, car truly in scene", read_image(manifest.resolve(p.with_image), channels=3))]
         _montage(figures / "insertion.png", panels)
         paths = render_trajectory(manifest, bg_t, read_splats(finetuned[0]), p.wlh, out / "trajectory", progress)

@@ -24,12 +24,12 @@ import numpy as np
 from ..io.ply import read_header, read_splats
 from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
 
-STAGES = ("reconstruct", "render", "restore", "refine", "harmonize", "shadow_region", "finetune",
+STAGES = ("reconstruct", "render", "cast_shadow", "restore", "refine", "harmonize", "finetune",
           "sh_eval", "evaluate")
 DIFFUSION_STAGES = ("restore", "harmonize")
 # Sub-effects decided here but applied inside another stage (no runner of their own); they are
 # cached exactly when their host stage is.
-APPLIED_INSIDE = {"shadow_region": "harmonize", "sh_eval": "render"}
+APPLIED_INSIDE = {"cast_shadow": "render", "sh_eval": "render"}
 
 
 @dataclass
@@ -127,6 +127,26 @@ def _has_ground_truth(manifest: Manifest) -> bool:
     return any(cf.image for cam in manifest.cameras for cf in cam.frames)
 
 
+def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
+    """Inserted vehicles cast shadows where the scene has a sun (recorded ones carry theirs)."""
+    from ..insertion.shadow import MIN_SUN_ELEVATION_SIN
+
+    eff = manifest.effects
+    casters = {a.id for a in manifest.inserted_actors if a.splats and a.wlh is not None}
+    frames = sorted({fi for cam in visible.values() for fi, ids in cam.items() if casters & set(ids)})
+    if eff.sun_direction is None:
+        return StageDecision("cast_shadow", False, "no sun in the scene")
+    if not eff.shadows:
+        return StageDecision("cast_shadow", False, "shadows off in the scene's effects")
+    if eff.sun_direction[2] > -MIN_SUN_ELEVATION_SIN:
+        return StageDecision("cast_shadow", False, "sun at or below the horizon")
+    if not frames:
+        return StageDecision("cast_shadow", False, "no inserted vehicle (with a size) in any frame")
+    seen = sorted({a for cam in visible.values() for fi in frames for a in cam.get(fi, []) if a in casters})
+    return StageDecision("cast_shadow", True, f"sun present: inserted vehicles cast shadows (shade keeps "
+                         f"{eff.shade:.2f} of the light)", frames, seen)
+
+
 def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None) -> Plan:
     """Decide every stage for this scene. ``previous`` is the last run's state (for caching)."""
     opt = options or PlanOptions()
@@ -145,6 +165,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
 
     stages.append(StageDecision("render", True, "always", frames_all,
                                 sorted({a for cam in visible.values() for ids in cam.values() for a in ids})))
+    stages.append(_cast_shadow(manifest, visible))
 
     if eff.lateral_offsets:
         offs = ", ".join(f"{o:g}" for o in eff.lateral_offsets)
@@ -170,15 +191,6 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
         harm = StageDecision("harmonize", True, f"{len(harm_actors)} inserted actor(s) visible",
                              harm_frames, harm_actors)
     stages.append(harm)
-    if not harm.run:
-        stages.append(StageDecision("shadow_region", False, "nothing harmonized"))
-    elif eff.sun_direction is None:
-        stages.append(StageDecision("shadow_region", False, "no sun in the scene"))
-    elif not eff.shadows:
-        stages.append(StageDecision("shadow_region", False, "shadows off in the scene's effects"))
-    else:
-        stages.append(StageDecision("shadow_region", True, "sun present: shadow region joins the mask",
-                                    harm_frames, harm_actors))
     if harm.run and eff.finetune:
         stages.append(StageDecision("finetune", True, "fit inserted actors' colour and opacity to the "
                                     "harmonized frames", harm_frames, harm_actors))

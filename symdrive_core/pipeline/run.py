@@ -22,7 +22,8 @@ from .report import Report
 from .stages import Shared, StageOptions
 from .state import RunState
 
-STAGE_DIRS = ["reconstruction", "render", "masks", "restore", "refine", "harmonize", "finetune", "insertion_assets"]
+STAGE_DIRS = ["reconstruction", "render", "masks", "shadows", "restore", "refine", "harmonize", "finetune",
+              "insertion_assets"]
 
 
 @dataclass
@@ -53,6 +54,7 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path, jobs: list[tuple[st
 
     renderer = None
     done = 0
+    casting = plan.stage("cast_shadow")
     for cam, fi in tqdm(jobs, desc="render", unit="frame", disable=not progress):
         rgb_path = output_path(out, "render", cam, fi)
         if rgb_path.exists():
@@ -60,8 +62,14 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path, jobs: list[tuple[st
         if renderer is None:
             renderer = SceneRenderer(manifest, device=device)
         frame = renderer.render(cam, fi, plan.visible[cam][fi])
+        if casting.run and fi in casting.frames:
+            casters = [a for a in plan.visible[cam][fi] if a in casting.actors]
+            frame = renderer.cast_shadows(cam, fi, frame, casters, manifest.effects.sun_direction,
+                                          manifest.effects.shade)
         for actor_id, mask in frame.instance.items():
             write_mask(output_path(out, "masks", cam, fi, actor=actor_id), mask)
+        if frame.shadow is not None:
+            write_mask(output_path(out, "shadows", cam, fi), frame.shadow)
         write_image(output_path(out, "render", cam, fi, ".depth.exr"), frame.depth, dtype="float")
         write_image(rgb_path, frame.rgb)  # written last: its presence marks the frame complete
         done += 1

@@ -6,7 +6,7 @@ culled for a frame are never handed to the rasterizer.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -22,6 +22,7 @@ class FrameRender:
     alpha: np.ndarray  # [H, W]
     depth: np.ndarray  # [H, W], expected camera z (0 where empty)
     instance: dict[str, np.ndarray]  # actor id -> accumulated alpha [H, W]
+    shadow: np.ndarray | None = None  # [H, W] occlusion of the sun by inserted vehicles, when cast
 
 
 class SceneRenderer:
@@ -38,11 +39,14 @@ class SceneRenderer:
             bg = read_splats(manifest.resolve(manifest.background_splats))
         self.background = None if bg is None else GaussianTensors.from_gaussians(bg, device=self.device)
         self.actors = {}
+        self.sources = {}  # actor id -> Gaussians as read (what a cast shadow is computed from)
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
             if g is None and a.splats:
                 g = read_splats(manifest.resolve(a.splats))
             if g is not None:
+                if not isinstance(g, GaussianTensors):
+                    self.sources[a.id] = g
                 self.actors[a.id] = g if isinstance(g, GaussianTensors) else GaussianTensors.from_gaussians(
                     g, device=self.device)
 
@@ -81,3 +85,32 @@ class SceneRenderer:
             instance[by_instance[iid]] = out["instance"][..., k].detach().cpu().numpy()
         return FrameRender(out["rgb"].detach().cpu().numpy(), out["alpha"][..., 0].detach().cpu().numpy(),
                            out["depth"][..., 0].detach().cpu().numpy(), instance)
+
+    def cast_shadows(self, camera: str, frame: int, render: FrameRender, actor_ids: list[str], sun_direction,
+                     ratio: float) -> FrameRender:
+        """``render`` with the sun shadows of ``actor_ids`` laid on its background
+        (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
+        from ..insertion.cast_shadow import combined_occlusion, darken, shadow_map
+        from ..insertion.place import place
+        from ..insertion.shadow import vehicle_ground_z
+
+        maps = []
+        for aid in actor_ids:
+            actor = self.manifest.actor(aid)
+            pose = actor.pose(frame)
+            if aid in self.sources and pose is not None and actor.wlh is not None:
+                maps.append(shadow_map(place(self.sources[aid], pose), sun_direction, vehicle_ground_z(pose, actor.wlh)))
+        maps = [m for m in maps if m is not None]
+        if not maps:
+            return render
+        cam = self.manifest.camera(camera)
+        cf = cam.frames[frame]
+        background = self.render(camera, frame, [])
+        occlusion = combined_occlusion(maps, cf.camera_to_world, cf.K, cam.width, cam.height, background.depth)
+        if not (occlusion > 0).any():
+            return replace(render, shadow=occlusion)
+        through = np.ones_like(occlusion, dtype=np.float64)
+        for a in render.instance.values():
+            through *= 1.0 - np.clip(a, 0.0, 1.0)
+        rgb = darken(render.rgb, background.rgb, 1.0 - through, occlusion, ratio)
+        return replace(render, rgb=rgb, shadow=occlusion)

@@ -167,7 +167,7 @@ def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
             continue
         actor = m.actor(aid)
         shadow = None
-        if ctx.plan.runs("shadow_region") and actor.wlh is not None:
+        if ctx.plan.runs("cast_shadow") and actor.wlh is not None:
             cf = cam.frames[fi]
             shadow = shadow_region(actor.pose(fi), actor.wlh, m.effects.sun_direction, cf.camera_to_world, cf.K,
                                    cam.width, cam.height)

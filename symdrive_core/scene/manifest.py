@@ -85,6 +85,11 @@ class IdMap:
     ids: dict[int, str]
 
 
+# A clear-sky street: skylight is a quarter to a half of the light on sunlit ground (more in a
+# street canyon, whose facades light the shade). Scenes set their own as ``effects.shadow_ratio``.
+DEFAULT_SHADOW_RATIO = 0.4
+
+
 @dataclass
 class Effects:
     lateral_offsets: list[float] = field(default_factory=list)
@@ -92,6 +97,14 @@ class Effects:
     finetune: bool = False
     shadows: bool = False
     sun_direction: np.ndarray | None = None  # direction light travels, world frame, unit
+    # Fraction of its light the ground keeps in full shadow (skylight over sun plus sky); None:
+    # DEFAULT_SHADOW_RATIO.
+    shadow_ratio: float | None = None
+
+    @property
+    def shade(self) -> float:
+        """The fraction of its light the ground keeps in a vehicle's full shadow in this scene."""
+        return DEFAULT_SHADOW_RATIO if self.shadow_ratio is None else float(self.shadow_ratio)
 
 
 @dataclass
@@ -168,6 +181,7 @@ class Manifest:
                 "shadows": self.effects.shadows,
                 "sun_direction": None if self.effects.sun_direction is None
                 else [float(v) for v in self.effects.sun_direction],
+                "shadow_ratio": None if self.effects.shadow_ratio is None else float(self.effects.shadow_ratio),
             },
             "output": self.output,
         }
@@ -405,9 +419,14 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
         if n < 1e-9:
             rd.fail("effects.sun_direction", "zero vector (omit it or use null for no sun)")
         sun = sun / n
+    ratio = None
+    if e.get("shadow_ratio") is not None:
+        ratio = rd.num(e["shadow_ratio"], "effects.shadow_ratio")
+        if not 0.0 <= ratio <= 1.0:
+            rd.fail("effects.shadow_ratio", f"must lie in [0, 1] (fraction of light kept in shadow), got {ratio}")
     effects = Effects(offsets, rd.boolean(e.get("harmonize", False), "effects.harmonize"),
                       rd.boolean(e.get("finetune", False), "effects.finetune"),
-                      rd.boolean(e.get("shadows", False), "effects.shadows"), sun)
+                      rd.boolean(e.get("shadows", False), "effects.shadows"), sun, ratio)
     gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
     return Manifest(
         name=name, frames=frames, cameras=cameras, actors=actors,

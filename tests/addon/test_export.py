@@ -162,3 +162,22 @@ def test_the_core_runs_the_exported_package_end_to_end(exported, tmp_path):
     assert not ran["reconstruct"] and not ran["restore"] and not ran["finetune"]  # as the export's effects say
     assert len(list((out / "render").rglob("*.png"))) == 10
     assert len(list((out / "harmonize").rglob("*.region.png"))) > 0
+
+
+def test_sun_lamp_exports_its_direction_and_the_shadow_ratio(blender, tmp_path):
+    import math
+
+    objs = two_car_scene(blender, tmp_path / "assets")
+    assert blender.ops.symdrive.export_scene(directory=str(tmp_path / "overcast")) == {"FINISHED"}
+    eff = load_manifest(tmp_path / "overcast").effects
+    assert not eff.shadows and eff.sun_direction is None and eff.shadow_ratio is None
+    sun = blender.data.objects.new("sun", blender.data.lights.new("sun", "SUN"))
+    blender.context.scene.collection.objects.link(sun)
+    sun.rotation_euler = (math.radians(40.0), 0.0, 0.0)  # light travels along R_x(40 deg) (0, 0, -1)
+    blender.context.scene.symdrive.shadow_ratio = 0.3
+    assert blender.ops.symdrive.export_scene(directory=str(tmp_path / "sunny")) == {"FINISHED"}
+    eff = load_manifest(tmp_path / "sunny").effects
+    travel = np.array([0.0, math.sin(math.radians(40.0)), -math.cos(math.radians(40.0))])
+    expected = np.linalg.inv(np.array(objs["background"].matrix_world))[:3, :3] @ travel
+    assert eff.shadows and eff.shadow_ratio == pytest.approx(0.3)
+    np.testing.assert_allclose(eff.sun_direction, expected / np.linalg.norm(expected), atol=1e-6)

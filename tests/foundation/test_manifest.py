@@ -28,6 +28,7 @@ def test_valid_manifest_loads_typed(tmp_path):
 def test_round_trip_through_save(tmp_path):
     m = _parse(manifest_dict(actors=("a",), lateral=(0.5,)), tmp_path)
     m.actors[0].poses[1] = None
+    m.effects.shadow_ratio = 0.3
     path = m.save(tmp_path / "manifest.json")
     m2 = load_manifest(tmp_path)
     assert m2.to_json() == m.to_json() and m2.actors[0].poses[1] is None
@@ -65,6 +66,8 @@ def _mutated(fn):
     (lambda d: d.pop("version"), "version", "required field is missing"),
     (lambda d: d.update(version=7), "version", "understands version 1"),
     (lambda d: d["effects"].update(sun_direction=[0, 0, 0]), r"effects\.sun_direction", "zero vector"),
+    (lambda d: d["effects"].update(shadow_ratio=1.5), r"effects\.shadow_ratio", r"\[0, 1\]"),
+    (lambda d: d["effects"].update(shadow_ratio="dark"), r"effects\.shadow_ratio", "finite number"),
     (lambda d: d["effects"].update(lateral_offsets=[1, "x"]), r"effects\.lateral_offsets\[1\]", "finite number"),
     (lambda d: d.update(masks={"entries": [{"camera": "front", "frame": 0, "actor": "zz"}]}),
      r"masks\.entries\[0\]\.actor", "no actor with id 'zz'"),

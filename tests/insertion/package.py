@@ -1,7 +1,9 @@
 """A synthetic scene package with one held-out insertion whose true look is known.
 
 The 'true' image is the background with the car relit by a fixed colour transform (dimmer,
-bluer), rendered by the same renderer; the studio asset is the untransformed car.
+bluer), rendered by the same renderer; the studio asset is the untransformed car. With a sun,
+the truth also has the car's hard shadow: ground pixels whose ray to the sun hits the exact box
+(a slab test, independent of any splat code) keep ``SHADOW_RATIO`` of their linear light.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from . import synthetic
 GAIN = np.array([0.55, 0.6, 0.8], np.float32)
 OFFSET = np.array([0.02, 0.03, 0.08], np.float32)
 W, H, FRAMES, HELD = 96, 60, 7, 3
+SHADOW_RATIO = 0.35
+SUN = (-0.45, 0.55, -0.7)  # light travels away from the camera's left: the shadow falls beside the car
 
 
 def relit(g: Gaussians) -> Gaussians:
@@ -37,8 +41,26 @@ def relight_region(image: np.ndarray, region: np.ndarray) -> np.ndarray:
     return np.where(region[..., None], image * GAIN + OFFSET, image).astype(np.float32)
 
 
-def write_package(root: Path) -> tuple[Path, Gaussians]:
-    """Package + background Gaussians; the car is parked 14 m down the drive."""
+def box_shadow(view: InsertionView, pose, wlh, sun) -> np.ndarray:
+    """Bool [H, W]: the pixel's ground point (z = 0) cannot see the sun past the box."""
+    from symdrive_core.insertion.shadow import ground_hits
+
+    cam = view.camera
+    xy, hit = ground_hits(cam.camera_to_world, cam.K, cam.width, cam.height, 0.0)
+    p = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], -1)
+    o = (p - pose.translation) @ pose.R  # box frame
+    d = -np.asarray(sun, np.float64) / np.linalg.norm(sun) @ pose.R  # towards the sun
+    half = np.array([wlh[1], wlh[0], wlh[2]]) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (-half - o) / d, (half - o) / d
+    near = np.nanmax(np.minimum(t1, t2), -1)
+    far = np.nanmin(np.maximum(t1, t2), -1)
+    return hit & (far >= np.maximum(near, 0.0))
+
+
+def write_package(root: Path, sun=None) -> tuple[Path, Gaussians]:
+    """Package + background Gaussians; the car is parked 14 m down the drive (``sun``: the truth
+    has its shadow, and the manifest says where the sun is and how dark shade is)."""
     root.mkdir(parents=True, exist_ok=True)
     bg, studio = synthetic.ground(), synthetic.car(1200)
     (root / "assets/box").mkdir(parents=True)
@@ -54,6 +76,13 @@ def write_package(root: Path) -> tuple[Path, Gaussians]:
     invisible = Gaussians(studio.means, studio.quats, studio.log_scales, np.full(len(studio), -30.0, np.float32),
                           studio.sh)
     empty = view.render_numpy(invisible)[0]
+    shadow = None
+    if sun is not None:
+        from symdrive_core.insertion.baselines import linear_to_srgb, srgb_to_linear
+
+        shadow = box_shadow(view, pose, synthetic.WLH, sun) & (alpha < 0.5)
+        truth = np.where(shadow[..., None], linear_to_srgb(SHADOW_RATIO * srgb_to_linear(truth)), truth)
+        write_mask(root / "gt/shadow.png", shadow.astype(np.float32))
     write_image(root / "gt/with.png", truth)
     write_image(root / "gt/without.png", empty)
     write_mask(root / "gt/mask.png", (alpha > 0.5).astype(np.float32))
@@ -67,13 +96,16 @@ def write_package(root: Path) -> tuple[Path, Gaussians]:
         "actors": [{"id": "insert_0", "kind": "inserted", "assets": {"splats": "assets/box/splats.ply"},
                     "wlh": list(synthetic.WLH),
                     "poses": [pose.to_json() if i == HELD else None for i in range(FRAMES)]}],
-        "effects": {"harmonize": True, "finetune": True},
+        "effects": {"harmonize": True, "finetune": True, "shadows": sun is not None,
+                    "sun_direction": None if sun is None else list(sun),
+                    "shadow_ratio": SHADOW_RATIO if sun is not None else None},
         "ground_truth": {"camera": "front", "train_frames": [i for i in range(FRAMES) if i != HELD],
                          "heldout_frames": [HELD],
                          "insertion": [{"actor": "insert_0", "asset": "assets/box", "kind": "box",
                                         "wlh": list(synthetic.WLH), "pose": pose.to_json(), "camera": "front",
                                         "frame": HELD, "with": "gt/with.png", "without": "gt/without.png",
-                                        "mask": "gt/mask.png", "shadow_mask": None}]},
+                                        "mask": "gt/mask.png",
+                                        "shadow_mask": None if shadow is None else "gt/shadow.png"}]},
     }
     (root / "manifest.json").write_text(json.dumps(manifest))
     write_splats(root / "background.ply", bg)

@@ -32,6 +32,22 @@ def test_insert_writes_frames_masks_and_regions(tmp_path):
     assert ((mask > 0.5) == truth_mask).mean() > 0.98  # the same car in the same place
     assert np.all(region[mask > 0.5] > 0.5)
     assert len(list((out / "front").glob("*.mask.png"))) == 1  # the actor exists in one frame only
+    assert not list((out / "front").glob("*.shadow.png"))  # no sun in this package
+
+
+def test_insert_under_a_sun_writes_the_cast_shadow(tmp_path):
+    path, _ = package.write_package(tmp_path / "pkg", sun=package.SUN)
+    out = tmp_path / "out"
+    args = _parse(["insert", str(path), "--actor", "insert_0", "--background", str(path.parent / "background.ply"),
+                   "--out", str(out)])
+    assert args.func(args) == 0
+    frame = out / "front" / f"{package.HELD:06d}"
+    shade = read_mask(frame.with_suffix(".shadow.png")) > 0.5
+    truth = read_mask(path.parent / "gt/shadow.png") > 0.5
+    region = read_mask(frame.with_suffix(".region.png")) > 0.5
+    assert (shade & truth).sum() >= 0.9 * truth.sum() and region[truth].all()
+    lit = read_image(path.parent / "gt/without.png", channels=3)
+    assert (read_image(frame.with_suffix(".png"), channels=3)[truth].sum(-1) < lit[truth].sum(-1)).all()
 
 
 def test_insert_eval_baselines_to_json(tmp_path, capsys):

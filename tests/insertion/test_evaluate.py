@@ -34,3 +34,32 @@ def test_without_a_harmonizer_only_baselines_are_measured(tmp_path):
     path, bg = package.write_package(tmp_path / "pkg")
     rows = evaluate_insertion(load_manifest(path), bg, progress=False)
     assert [r["method"] for r in rows] == ["naive", "color_transfer"]
+
+
+def test_cast_shadow_matches_the_boxs_true_shadow(tmp_path):
+    from symdrive_core.insertion.assets import load_vehicle_asset
+    from symdrive_core.insertion.evaluate import insert_frame
+    from symdrive_core.io.images import read_image, read_mask
+    from symdrive_core.metrics import psnr
+    from symdrive_core.splat.tensors import GaussianTensors
+
+    path, bg = package.write_package(tmp_path / "pkg", sun=package.SUN)
+    manifest = load_manifest(path)
+    p = held_out_placements(manifest)[0]
+    car = load_vehicle_asset(manifest.resolve(p.asset)).gaussians
+    frame = insert_frame(manifest, GaussianTensors.from_gaussians(bg), car, p.pose, p.wlh, p.camera)
+    truth = read_mask(manifest.resolve(p.shadow_mask)) > 0.5
+    cast = (frame.shadow.occlusion > 0.5) & (frame.vehicle_alpha < 0.5)  # the truth marks uncovered ground only
+    assert truth.sum() > 40
+    assert (cast & truth).sum() / (cast | truth).sum() > 0.8
+    assert frame.region[truth].all()  # harmonization may reach every truly shadowed pixel
+    gt = read_image(manifest.resolve(p.with_image), channels=3)
+    # the box's shade at the scene's ratio: far closer to the truth than the unshaded render
+    assert psnr(frame.image, gt, truth) > psnr(frame.plain, gt, truth) + 12.0
+    rows = {r["method"]: r for r in evaluate_insertion(manifest, bg, harmonizer=package.relight_region,
+                                                       config=InsertionConfig(train_views=3, finetune=FinetuneConfig(
+                                                           steps=40, lr_sh0=2e-2)), progress=False)}
+    assert list(rows) == ["naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow"]
+    # over car and shadow together the car's light dominates; the shadow still adds
+    assert rows["cast_shadow"]["masked_psnr"] > rows["naive"]["masked_psnr"] + 0.5
+    assert rows["finetuned_shadow"]["masked_psnr"] > rows["finetuned"]["masked_psnr"] + 0.5

@@ -9,7 +9,7 @@ from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import read_splats
 from symdrive_core.pipeline.accuracy_time import Setting, run_settings, write_outputs
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
-from symdrive_core.pipeline.knobs import Budget, renderer_settings, spread
+from symdrive_core.pipeline.knobs import Budget, renderer_settings, shadow_settings, spread
 from symdrive_core.scene import load_manifest
 
 
@@ -50,7 +50,18 @@ def test_accuracy_time_command_quick(tmp_path, capsys):
     assert main(["bench", "accuracy-time", "--quick", "--quiet", "--out", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "accuracy_time.json").read_text())["rows"]
     knobs = {r["knob"] for r in rows}
-    assert {"sampler steps", "N_start of 50 steps", "AR step d", "alpha threshold", "fine-tune iterations",
-            "antialiasing"} <= knobs
+    assert {"sampler steps", "N_start of 50 steps, 1 sample", "AR step d", "alpha threshold", "fine-tune iterations",
+            "antialiasing", "cast shadow"} <= knobs
     assert all(sum(r["default"] for r in rows if r["knob"] == k) == 1 for k in knobs)
     assert (tmp_path / "pareto.png").exists()
+
+
+def test_cast_shadow_knob_measured_against_cycles():
+    m = load_manifest(DEMO_PACKAGE)
+    rows = run_settings(shadow_settings(m, read_splats(m.resolve(m.background_splats)), Budget(placements=1)),
+                        progress=False)
+    by = {r["value"]: r for r in rows}
+    assert list(by)[0] == "off" and sum(r["default"] for r in rows) == 1 and by["shade keeps 0.40"]["default"]
+    assert all(r["seconds"] > 0 and 10.0 < r["psnr"] < 40.0 for r in rows)
+    # the sunny street: its car's shadow at any plausible ratio beats no shadow
+    assert min(r["psnr"] for r in rows if r["value"] != "off") > by["off"]["psnr"]

@@ -14,8 +14,9 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     assert {"render", "restore", "harmonize", "finetune", "evaluate"} <= ran
     methods = {(r["offset_m"], r["method"]) for r in report["metrics"]["lateral"]}
     assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (1.0, "single_view")} <= methods
-    assert {r["method"] for r in report["metrics"]["insertion"]} == {"naive", "color_transfer", "harmonized",
-                                                                      "finetuned"}
+    assert {r["method"] for r in report["metrics"]["insertion"]} == {
+        "naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow"}
+    assert len(list((out / "shadows").rglob("*.png"))) == 3  # the sunny street: frames with an inserted car
     assert 25.0 < report["metrics"]["reconstruction"]["psnr_heldout"] < 60.0
     md = (out / "report.md").read_text()
     for fig in ("lateral.png", "lateral_psnr.png", "insertion.png", "trajectory.png"):

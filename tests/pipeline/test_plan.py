@@ -20,7 +20,7 @@ def test_full_scene_runs_every_effect(make_package):
     m.effects.finetune = True
     plan = make_plan(m)
     assert _stages(plan) == {"reconstruct": False, "render": True, "restore": True, "refine": True,
-                             "harmonize": True, "shadow_region": True, "finetune": True,
+                             "harmonize": True, "cast_shadow": True, "finetune": True,
                              "sh_eval": True, "evaluate": False}
     assert plan.needs_diffusion
 
@@ -32,10 +32,23 @@ def test_no_inserted_actor_no_diffusion(make_package):
     assert not plan.needs_diffusion
 
 
-def test_no_sun_no_shadow_region(make_package):
+def test_no_sun_no_cast_shadow(make_package):
     plan = make_plan(load_manifest(make_package(harmonize=True, sun=None)))
     assert plan.runs("harmonize")
-    assert not plan.runs("shadow_region") and plan.stage("shadow_region").reason == "no sun in the scene"
+    assert not plan.runs("cast_shadow") and plan.stage("cast_shadow").reason == "no sun in the scene"
+
+
+def test_cast_shadow_needs_a_sun_above_the_horizon_and_an_inserted_vehicle(make_package):
+    sunny = make_plan(load_manifest(make_package(harmonize=False, sun=[1, 0, -1])))
+    assert sunny.runs("cast_shadow") and not sunny.runs("harmonize")  # shadows do not need the diffusion model
+    assert sunny.stage("cast_shadow").frames and "0.40" in sunny.stage("cast_shadow").reason
+    low = make_plan(load_manifest(make_package("low", sun=[1, 0, 0.1])))
+    assert not low.runs("cast_shadow") and low.stage("cast_shadow").reason == "sun at or below the horizon"
+    empty = make_plan(load_manifest(make_package("empty", actors=(), sun=[1, 0, -1])))
+    assert not empty.runs("cast_shadow")
+    off = load_manifest(make_package("off", sun=[1, 0, -1]))
+    off.effects.shadows = False
+    assert make_plan(off).stage("cast_shadow").reason == "shadows off in the scene's effects"
 
 
 def test_three_scenes_three_stage_lists(make_package):
@@ -113,7 +126,7 @@ def test_plan_command_json(make_package, capsys):
     assert main(["plan", str(make_package(lateral=(0.5,))), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["needs_diffusion"] is True
-    assert [s["name"] for s in data["stages"]][:3] == ["reconstruct", "render", "restore"]
+    assert [s["name"] for s in data["stages"]][:4] == ["reconstruct", "render", "cast_shadow", "restore"]
 
 
 def test_sh_degree_of_a_compressed_ply_comes_from_its_sh_element(tmp_path):

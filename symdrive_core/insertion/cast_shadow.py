@@ -1,0 +1,182 @@
+"""The shadow an inserted vehicle casts on the ground, from its own Gaussians.
+
+Sunlight is parallel, so the shadow on the ground plane is the vehicle's Gaussians projected
+along the sun direction onto that plane. The projection is affine, so each 3D Gaussian becomes
+a 2D Gaussian there, and its value at a ground point equals the largest response of the 3D
+Gaussian along that point's ray to the sun (minimising a quadratic form along a line leaves the
+form of the projected covariance). Compositing the projected Gaussians with the rasterizer gives
+the occlusion ``1 - prod(1 - alpha_i)`` on a ground grid: a shadow map. Each camera pixel whose
+ray meets the ground reads the map at its ground point, and the background there keeps the
+fraction ``shadow_ratio`` of its linear-light radiance (the skylight share of sun plus sky)
+where the occlusion is 1, blended linearly below. A pixel whose rendered surface stands well
+above the ground along its ray (a parked car, a wall in front of the ground point) shows
+something the plane does not model, and is left lit; so are the vehicle's own pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .. import conventions
+from ..gaussians import Gaussians
+from ..scene import Pose
+from ..splat.kernels import ALPHA_MAX
+from ..splat.projection import quat_to_rotmat
+from ..splat.rasterize import RasterizePixels, bin_gaussians
+from .baselines import linear_to_srgb, srgb_to_linear
+from .composite import InsertionView
+from .place import place
+from .shadow import MIN_SUN_ELEVATION_SIN, ground_hits, vehicle_ground_z
+
+ALPHA_THRESHOLD = 1.0 / 255.0
+MAP_MAX_PIXELS = 1024  # longest side of the shadow map
+MAP_MIN_CELL_M = 0.01
+MAP_BLUR_CELLS2 = 0.3  # added to each projected covariance (cells^2): a flat splat edge-on to the sun stays finite
+# What a pixel shows counts as ground up to this height (m): kerbs, and the depth a splat render
+# gives a road seen at a grazing angle (centre depths, biased towards the camera).
+GROUND_HEIGHT_TOLERANCE = 0.5
+EXTENT_SIGMAS = 3.5  # o * exp(-3.5^2 / 2) < 1/255 for any opacity: the cut drops nothing the kernel keeps
+
+
+@dataclass(frozen=True)
+class ShadowMap:
+    occlusion: np.ndarray  # [rows, cols] in [0, 1]; row = y, col = x on the ground
+    origin: np.ndarray  # world (x, y) of the map's corner (pixel edge, not centre)
+    cell: float  # metres per map pixel
+    ground_z: float
+
+    def sample(self, xy: np.ndarray) -> np.ndarray:
+        """Bilinear occlusion at world ground points [..., 2]; 0 outside the map."""
+        rows, cols = self.occlusion.shape
+        f = (np.asarray(xy, dtype=np.float64) - self.origin) / self.cell - conventions.PIXEL_CENTER_OFFSET
+        x0, y0 = np.floor(f[..., 0]), np.floor(f[..., 1])
+        ax, ay = f[..., 0] - x0, f[..., 1] - y0
+        padded = np.pad(self.occlusion.astype(np.float64), 1)
+
+        def at(yy, xx):
+            inside = (yy >= -1) & (yy <= rows) & (xx >= -1) & (xx <= cols)
+            v = padded[np.clip(yy + 1, 0, rows + 1).astype(np.int64), np.clip(xx + 1, 0, cols + 1).astype(np.int64)]
+            return np.where(inside, v, 0.0)
+
+        return ((1 - ay) * ((1 - ax) * at(y0, x0) + ax * at(y0, x0 + 1))
+                + ay * ((1 - ax) * at(y0 + 1, x0) + ax * at(y0 + 1, x0 + 1)))
+
+
+def _unit_sun(sun_direction) -> np.ndarray | None:
+    s = np.asarray(sun_direction, dtype=np.float64)
+    n = float(np.linalg.norm(s))
+    if not np.isfinite(n) or n == 0.0:
+        raise ValueError("sun_direction must be a finite non-zero vector")
+    s = s / n
+    return None if s[2] > -MIN_SUN_ELEVATION_SIN else s
+
+
+def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, max_pixels: int = MAP_MAX_PIXELS,
+               min_cell: float = MAP_MIN_CELL_M) -> ShadowMap | None:
+    """The occlusion the world-placed Gaussians cast on ``z = ground_z``; None when the sun is down."""
+    s = _unit_sun(sun_direction)
+    if s is None or len(world_vehicle) == 0:
+        return None
+    keep = world_vehicle.finite_mask() & (world_vehicle.opacities >= ALPHA_THRESHOLD)
+    g = world_vehicle.subset(keep)
+    if len(g) == 0:
+        return None
+    f64 = torch.float64
+    # x -> x + ((ground_z - x_z) / s_z) s: drop each point along the sun ray onto the plane.
+    M = torch.tensor([[1.0, 0.0, -s[0] / s[2]], [0.0, 1.0, -s[1] / s[2]]], dtype=f64)
+    mu = torch.as_tensor(g.means, dtype=f64)
+    R = quat_to_rotmat(torch.as_tensor(g.unit_quats, dtype=f64))
+    RS = R * torch.as_tensor(g.scales, dtype=f64)[:, None, :]
+    A = M @ RS  # [N, 2, 3]
+    cov = A @ A.transpose(1, 2)
+    xy = mu[:, :2] + ((ground_z - mu[:, 2:3]) / s[2]) * torch.as_tensor(s[:2], dtype=f64)
+    sd = torch.sqrt(torch.stack([cov[:, 0, 0], cov[:, 1, 1]], -1))
+    lo = (xy - EXTENT_SIGMAS * sd).min(0).values.numpy()
+    hi = (xy + EXTENT_SIGMAS * sd).max(0).values.numpy()
+    cell = max(float(np.max(hi - lo)) / max_pixels, min_cell)
+    cols, rows = (int(np.ceil(v)) + 1 for v in (hi - lo) / cell)
+    m2d = (xy - torch.as_tensor(lo, dtype=f64)) / cell
+    c = cov / cell**2 + MAP_BLUR_CELLS2 * torch.eye(2, dtype=f64)
+    det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] ** 2
+    conics = torch.stack([c[:, 1, 1], -c[:, 0, 1], c[:, 0, 0]], -1) / det[:, None]
+    radii = torch.ceil(EXTENT_SIGMAS * torch.sqrt(torch.stack([c[:, 0, 0], c[:, 1, 1]], -1))).to(torch.int32)
+    bins = bin_gaussians(m2d, radii, -torch.as_tensor(g.means[:, 2], dtype=f64), cols, rows)
+    opac = torch.as_tensor(np.minimum(g.opacities, ALPHA_MAX), dtype=f64)
+    with torch.no_grad():
+        _, alpha, _ = RasterizePixels.apply(m2d, conics, opac, torch.zeros(len(g), 1, dtype=f64),
+                                            torch.zeros(len(g), dtype=torch.int64), 0, bins, cols, rows,
+                                            ALPHA_THRESHOLD)
+    return ShadowMap(alpha.numpy(), lo, cell, float(ground_z))
+
+
+def occlusion_image(smap: ShadowMap, c2w: np.ndarray, K: np.ndarray, width: int, height: int,
+                    surface_depth: np.ndarray | None = None) -> np.ndarray:
+    """Occlusion [H, W] at the ground point of every pixel centre: 0 where the ray misses the
+    ground, or where ``surface_depth`` (camera z of what the pixel shows, 0 for nothing) puts
+    the surface more than :data:`GROUND_HEIGHT_TOLERANCE` above the ground."""
+    xy, hit = ground_hits(c2w, K, width, height, smap.ground_z)
+    occ = np.where(hit, smap.sample(xy), 0.0)
+    if surface_depth is not None:
+        c2w = np.asarray(c2w, dtype=np.float64)
+        w2c = conventions.invert_rigid(c2w)
+        points = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), smap.ground_z)], -1)
+        ground_depth = (points @ w2c[:3, :3].T + w2c[:3, 3])[..., 2]
+        depth = np.asarray(surface_depth, dtype=np.float64)
+        # along one ray height is linear in camera z: the camera's height, scaled down to the ground's
+        fraction = np.divide(depth, ground_depth, out=np.ones_like(depth), where=hit & (ground_depth > 0))
+        above = (c2w[2, 3] - smap.ground_z) * (1.0 - fraction)
+        occ = np.where((depth <= 0) | (above <= GROUND_HEIGHT_TOLERANCE), occ, 0.0)
+    return occ.astype(np.float32)
+
+
+@dataclass(frozen=True)
+class CastShadow:
+    """What one view needs to lay a vehicle's shadow on any render of it."""
+
+    occlusion: np.ndarray  # [H, W] in [0, 1]
+    background: np.ndarray  # the background alone, [H, W, 3]
+    ratio: float
+
+    def apply(self, image: np.ndarray, vehicle_alpha: np.ndarray) -> np.ndarray:
+        return darken(image, self.background, vehicle_alpha, self.occlusion, self.ratio)
+
+
+def combined_occlusion(maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, width: int, height: int,
+                       surface_depth: np.ndarray | None = None) -> np.ndarray:
+    """Occlusion [H, W] of several vehicles' shadows: light passes each one in turn."""
+    through = np.ones((height, width), np.float64)
+    for smap in maps:
+        through *= 1.0 - occlusion_image(smap, c2w, K, width, height, surface_depth)
+    return (1.0 - through).astype(np.float32)
+
+
+def vehicle_shadow(view: InsertionView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
+                   ratio: float) -> CastShadow | None:
+    """The shadow ``vehicle`` (its own frame) casts at ``pose`` in ``view``; None when the sun is down."""
+    smap = shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh))
+    if smap is None:
+        return None
+    cam = view.camera
+    background, depth = view.render_background_numpy()
+    return CastShadow(occlusion_image(smap, cam.camera_to_world, cam.K, cam.width, cam.height, depth),
+                      background, float(ratio))
+
+
+def darken(image: np.ndarray, background: np.ndarray, vehicle_alpha: np.ndarray, occlusion: np.ndarray,
+           shadow_ratio: float) -> np.ndarray:
+    """``image`` with the shadow laid on its background: where the vehicle does not cover a pixel,
+    the background's linear radiance is scaled by ``1 - (1 - shadow_ratio) * occlusion``."""
+    if not 0.0 <= float(shadow_ratio) <= 1.0:
+        raise ValueError(f"shadow_ratio must lie in [0, 1], got {shadow_ratio}")
+    keep = 1.0 - (1.0 - float(shadow_ratio)) * np.clip(occlusion, 0.0, 1.0)[..., None]
+    bg = np.asarray(background, dtype=np.float64)
+    shaded = linear_to_srgb(srgb_to_linear(bg) * keep)
+    uncovered = 1.0 - np.clip(np.asarray(vehicle_alpha, dtype=np.float64), 0.0, 1.0)[..., None]
+    out = np.asarray(image, dtype=np.float64) + uncovered * (shaded - bg)
+    touched = occlusion > 0
+    result = np.array(image, dtype=np.float32, copy=True)
+    result[touched] = np.clip(out[touched], 0.0, 1.0)
+    return result
