@@ -29,7 +29,7 @@ from ..splat.rasterize import RasterizePixels, bin_gaussians
 from .baselines import linear_to_srgb, srgb_to_linear
 from .composite import InsertionView
 from .place import place
-from .shadow import MIN_SUN_ELEVATION_SIN, ground_hits, vehicle_ground_z
+from .shadow import MIN_SUN_ELEVATION_SIN, ground_hits, shadow_polygon, vehicle_ground_z
 
 ALPHA_THRESHOLD = 1.0 / 255.0
 MAP_MAX_PIXELS = 1024  # longest side of the shadow map
@@ -38,6 +38,7 @@ MAP_BLUR_CELLS2 = 0.3  # added to each projected covariance (cells^2): a flat sp
 # What a pixel shows counts as ground up to this height (m): kerbs, and the depth a splat render
 # gives a road seen at a grazing angle (centre depths, biased towards the camera).
 GROUND_HEIGHT_TOLERANCE = 0.5
+SHADOW_WINDOW_MARGIN_M = 1.0  # room around the box's shadow for splats past the box and soft edges
 EXTENT_SIGMAS = 3.5  # o * exp(-3.5^2 / 2) < 1/255 for any opacity: the cut drops nothing the kernel keeps
 
 
@@ -74,9 +75,12 @@ def _unit_sun(sun_direction) -> np.ndarray | None:
     return None if s[2] > -MIN_SUN_ELEVATION_SIN else s
 
 
-def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, max_pixels: int = MAP_MAX_PIXELS,
-               min_cell: float = MAP_MIN_CELL_M) -> ShadowMap | None:
-    """The occlusion the world-placed Gaussians cast on ``z = ground_z``; None when the sun is down."""
+def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, bounds=None,
+               max_pixels: int = MAP_MAX_PIXELS, min_cell: float = MAP_MIN_CELL_M) -> ShadowMap | None:
+    """The occlusion the world-placed Gaussians cast on ``z = ground_z``; None when the sun is down.
+
+    ``bounds`` ((x0, y0), (x1, y1)) is the ground window to map; without it the window covers every
+    Gaussian's footprint, which a single huge floater would stretch to a useless resolution."""
     s = _unit_sun(sun_direction)
     if s is None or len(world_vehicle) == 0:
         return None
@@ -93,16 +97,20 @@ def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, max_
     A = M @ RS  # [N, 2, 3]
     cov = A @ A.transpose(1, 2)
     xy = mu[:, :2] + ((ground_z - mu[:, 2:3]) / s[2]) * torch.as_tensor(s[:2], dtype=f64)
-    sd = torch.sqrt(torch.stack([cov[:, 0, 0], cov[:, 1, 1]], -1))
-    lo = (xy - EXTENT_SIGMAS * sd).min(0).values.numpy()
-    hi = (xy + EXTENT_SIGMAS * sd).max(0).values.numpy()
+    if bounds is None:
+        sd = torch.sqrt(torch.stack([cov[:, 0, 0], cov[:, 1, 1]], -1))
+        lo = (xy - EXTENT_SIGMAS * sd).min(0).values.numpy()
+        hi = (xy + EXTENT_SIGMAS * sd).max(0).values.numpy()
+    else:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
     cell = max(float(np.max(hi - lo)) / max_pixels, min_cell)
     cols, rows = (int(np.ceil(v)) + 1 for v in (hi - lo) / cell)
     m2d = (xy - torch.as_tensor(lo, dtype=f64)) / cell
     c = cov / cell**2 + MAP_BLUR_CELLS2 * torch.eye(2, dtype=f64)
     det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] ** 2
     conics = torch.stack([c[:, 1, 1], -c[:, 0, 1], c[:, 0, 0]], -1) / det[:, None]
-    radii = torch.ceil(EXTENT_SIGMAS * torch.sqrt(torch.stack([c[:, 0, 0], c[:, 1, 1]], -1))).to(torch.int32)
+    reach = EXTENT_SIGMAS * torch.sqrt(torch.stack([c[:, 0, 0], c[:, 1, 1]], -1))
+    radii = torch.ceil(torch.clamp(reach, max=float(4 * max(rows, cols)))).to(torch.int32)  # past the map: clipped
     bins = bin_gaussians(m2d, radii, -torch.as_tensor(g.means[:, 2], dtype=f64), cols, rows)
     opac = torch.as_tensor(np.minimum(g.opacities, ALPHA_MAX), dtype=f64)
     with torch.no_grad():
@@ -110,6 +118,15 @@ def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, max_
                                             torch.zeros(len(g), dtype=torch.int64), 0, bins, cols, rows,
                                             ALPHA_THRESHOLD)
     return ShadowMap(alpha.numpy(), lo, cell, float(ground_z))
+
+
+def shadow_window(pose: Pose, wlh, sun_direction, margin: float = SHADOW_WINDOW_MARGIN_M):
+    """Ground window ((x0, y0), (x1, y1)) of a vehicle's box shadow grown by ``margin`` metres
+    (None when the sun is down): the map covers the car's shadow, not its stray Gaussians'."""
+    hull = shadow_polygon(pose, wlh, sun_direction)
+    if hull is None:
+        return None
+    return hull.min(0) - margin, hull.max(0) + margin
 
 
 def occlusion_image(smap: ShadowMap, c2w: np.ndarray, K: np.ndarray, width: int, height: int,
@@ -156,7 +173,8 @@ def combined_occlusion(maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, wi
 def vehicle_shadow(view: InsertionView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
                    ratio: float) -> CastShadow | None:
     """The shadow ``vehicle`` (its own frame) casts at ``pose`` in ``view``; None when the sun is down."""
-    smap = shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh))
+    smap = shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh),
+                      bounds=shadow_window(pose, wlh, sun_direction))
     if smap is None:
         return None
     cam = view.camera

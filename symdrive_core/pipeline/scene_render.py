@@ -90,7 +90,7 @@ class SceneRenderer:
                      ratio: float) -> FrameRender:
         """``render`` with the sun shadows of ``actor_ids`` laid on its background
         (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
-        from ..insertion.cast_shadow import combined_occlusion, darken, shadow_map
+        from ..insertion.cast_shadow import combined_occlusion, darken, shadow_map, shadow_window
         from ..insertion.place import place
         from ..insertion.shadow import vehicle_ground_z
 
@@ -99,7 +99,9 @@ class SceneRenderer:
             actor = self.manifest.actor(aid)
             pose = actor.pose(frame)
             if aid in self.sources and pose is not None and actor.wlh is not None:
-                maps.append(shadow_map(place(self.sources[aid], pose), sun_direction, vehicle_ground_z(pose, actor.wlh)))
+                maps.append(shadow_map(place(self.sources[aid], pose), sun_direction,
+                                       vehicle_ground_z(pose, actor.wlh),
+                                       bounds=shadow_window(pose, actor.wlh, sun_direction)))
         maps = [m for m in maps if m is not None]
         if not maps:
             return render

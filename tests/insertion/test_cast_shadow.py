@@ -151,3 +151,21 @@ def test_no_shadow_on_what_stands_in_front_of_the_ground():
     occ = occlusion_image(smap, *args, walled)
     assert (occ[:, : cam.width // 2] == 0).all() and bare[:, : cam.width // 2].max() > 0.1
     np.testing.assert_array_equal(occ[:, cam.width // 2:], bare[:, cam.width // 2:])
+
+
+def test_a_huge_floater_does_not_wash_out_the_cars_shadow():
+    from symdrive_core.insertion.cast_shadow import shadow_window
+    from symdrive_core.insertion.place import place
+
+    pose, sun = synthetic.car_pose(), _sun(40.0, 60.0)
+    car = place(synthetic.car(800), pose)
+    floater = _gaussians([pose.translation + [0.0, 0.0, 3.0]], [[1e4, 1e4, 1e4]], opacities=np.array([0.01]))
+    with_floater = Gaussians(*(np.concatenate([getattr(car, k), getattr(floater, k)])
+                               for k in ("means", "quats", "log_scales", "opacity_logits", "sh")))
+    window = shadow_window(pose, synthetic.WLH, sun)
+    clean = shadow_map(car, sun, 0.0, bounds=window)
+    dirty = shadow_map(with_floater, sun, 0.0, bounds=window)
+    assert dirty.cell == clean.cell <= 0.02 and np.isfinite(dirty.occlusion).all()
+    # the floater adds its own faint 1 % everywhere, and nothing else
+    np.testing.assert_allclose(dirty.occlusion, 1 - (1 - clean.occlusion) * 0.99, atol=2e-3)
+    assert clean.occlusion.max() > 0.9
