@@ -29,7 +29,7 @@ from ..splat.rasterize import RasterizePixels, bin_gaussians
 from .baselines import linear_to_srgb, srgb_to_linear
 from .composite import InsertionView
 from .place import place
-from .shadow import MIN_SUN_ELEVATION_SIN, ground_hits, shadow_polygon, vehicle_ground_z
+from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z
 
 ALPHA_THRESHOLD = 1.0 / 255.0
 MAP_MAX_PIXELS = 1024  # longest side of the shadow map
@@ -66,22 +66,13 @@ class ShadowMap:
                 + ay * ((1 - ax) * at(y0 + 1, x0) + ax * at(y0 + 1, x0 + 1)))
 
 
-def _unit_sun(sun_direction) -> np.ndarray | None:
-    s = np.asarray(sun_direction, dtype=np.float64)
-    n = float(np.linalg.norm(s))
-    if not np.isfinite(n) or n == 0.0:
-        raise ValueError("sun_direction must be a finite non-zero vector")
-    s = s / n
-    return None if s[2] > -MIN_SUN_ELEVATION_SIN else s
-
-
 def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, bounds=None,
                max_pixels: int = MAP_MAX_PIXELS, min_cell: float = MAP_MIN_CELL_M) -> ShadowMap | None:
     """The occlusion the world-placed Gaussians cast on ``z = ground_z``; None when the sun is down.
 
     ``bounds`` ((x0, y0), (x1, y1)) is the ground window to map; without it the window covers every
     Gaussian's footprint, which a single huge floater would stretch to a useless resolution."""
-    s = _unit_sun(sun_direction)
+    s = sun_above_horizon(sun_direction)
     if s is None or len(world_vehicle) == 0:
         return None
     keep = world_vehicle.finite_mask() & (world_vehicle.opacities >= ALPHA_THRESHOLD)
@@ -138,9 +129,8 @@ def occlusion_image(smap: ShadowMap, c2w: np.ndarray, K: np.ndarray, width: int,
     occ = np.where(hit, smap.sample(xy), 0.0)
     if surface_depth is not None:
         c2w = np.asarray(c2w, dtype=np.float64)
-        w2c = conventions.invert_rigid(c2w)
-        points = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), smap.ground_z)], -1)
-        ground_depth = (points @ w2c[:3, :3].T + w2c[:3, 3])[..., 2]
+        points = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), smap.ground_z)], -1).reshape(-1, 3)
+        ground_depth = conventions.project_points(points, conventions.invert_rigid(c2w), K)[1].reshape(xy.shape[:-1])
         depth = np.asarray(surface_depth, dtype=np.float64)
         # along one ray height is linear in camera z: the camera's height, scaled down to the ground's
         fraction = np.divide(depth, ground_depth, out=np.ones_like(depth), where=hit & (ground_depth > 0))
@@ -170,11 +160,16 @@ def combined_occlusion(maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, wi
     return (1.0 - through).astype(np.float32)
 
 
+def vehicle_shadow_map(vehicle: Gaussians, pose: Pose, wlh, sun_direction) -> ShadowMap | None:
+    """The shadow map of ``vehicle`` (its own frame) standing at ``pose``; None when the sun is down."""
+    return shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh),
+                      bounds=shadow_window(pose, wlh, sun_direction))
+
+
 def vehicle_shadow(view: InsertionView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
                    ratio: float) -> CastShadow | None:
     """The shadow ``vehicle`` (its own frame) casts at ``pose`` in ``view``; None when the sun is down."""
-    smap = shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh),
-                      bounds=shadow_window(pose, wlh, sun_direction))
+    smap = vehicle_shadow_map(vehicle, pose, wlh, sun_direction)
     if smap is None:
         return None
     cam = view.camera

@@ -3,8 +3,9 @@
 Outputs under ``out``: ``<camera>/<frame>.png`` (the insertion, with its cast shadow where the
 scene has a sun), ``<camera>/<frame>.mask.png`` (the vehicle's accumulated alpha),
 ``<camera>/<frame>.shadow.png`` (how much sun it blocks, sunny scenes only) and
-``<camera>/<frame>.region.png`` (vehicle ∪ shadow region, what harmonization may change). Frames where the actor is absent or outside the frustum are
-skipped; every file is written atomically.
+``<camera>/<frame>.region.png`` (vehicle ∪ shadow region, what harmonization may change).
+Frames where the actor is absent or outside the frustum are skipped; every file is written
+atomically.
 """
 
 from __future__ import annotations

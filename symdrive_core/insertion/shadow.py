@@ -39,6 +39,17 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     return np.asarray(lower[:-1] + upper[:-1], dtype=np.float64)
 
 
+def sun_above_horizon(sun_direction) -> np.ndarray | None:
+    """The unit direction sunlight travels, or None when it travels upwards or grazes the ground
+    (no ground shadow then). A zero or non-finite vector is an error."""
+    s = np.asarray(sun_direction, dtype=np.float64)
+    n = float(np.linalg.norm(s))
+    if not np.isfinite(n) or n == 0.0:
+        raise ValueError("sun_direction must be a finite non-zero vector")
+    s = s / n
+    return None if s[2] > -MIN_SUN_ELEVATION_SIN else s
+
+
 def vehicle_ground_z(pose: Pose, wlh) -> float:
     """Height of the ground a vehicle stands on: the bottom of its box at ``pose``."""
     return float(pose.apply(conventions.vehicle_box_corners(wlh))[:, 2].min())
@@ -46,9 +57,8 @@ def vehicle_ground_z(pose: Pose, wlh) -> float:
 
 def shadow_polygon(pose: Pose, wlh, sun_direction, ground_z: float | None = None) -> np.ndarray | None:
     """Ground-plane hull [M, 2] (world x, y) of the box's shadow, None when the sun is down."""
-    s = np.asarray(sun_direction, dtype=np.float64)
-    s = s / np.linalg.norm(s)
-    if s[2] > -MIN_SUN_ELEVATION_SIN:  # light travelling upwards or grazing: no ground shadow
+    s = sun_above_horizon(sun_direction)
+    if s is None:
         return None
     corners = pose.apply(conventions.vehicle_box_corners(wlh))
     gz = vehicle_ground_z(pose, wlh) if ground_z is None else float(ground_z)

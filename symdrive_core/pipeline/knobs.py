@@ -225,6 +225,7 @@ def shadow_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
 
     background = GaussianTensors.from_gaussians(gaussians)
     placements = held_out_placements(manifest)[: budget.placements]
+    cars = [load_vehicle_asset(manifest.resolve(p.asset)).gaussians for p in placements]
 
     def measure(ratio: float | None):
         scene = replace(manifest, effects=replace(manifest.effects, shadows=ratio is not None,
@@ -232,8 +233,7 @@ def shadow_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
 
         def run() -> dict:
             rows, seconds = [], []
-            for p in placements:
-                car = load_vehicle_asset(manifest.resolve(p.asset)).gaussians
+            for p, car in zip(placements, cars):
                 t = time.perf_counter()
                 frame = insert_frame(scene, background, car, p.pose, p.wlh, p.camera)
                 seconds.append(time.perf_counter() - t)

@@ -129,7 +129,7 @@ def _has_ground_truth(manifest: Manifest) -> bool:
 
 def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
     """Inserted vehicles cast shadows where the scene has a sun (recorded ones carry theirs)."""
-    from ..insertion.shadow import MIN_SUN_ELEVATION_SIN
+    from ..insertion.shadow import sun_above_horizon
 
     eff = manifest.effects
     casters = {a.id for a in manifest.inserted_actors if a.splats and a.wlh is not None}
@@ -138,7 +138,7 @@ def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
         return StageDecision("cast_shadow", False, "no sun in the scene")
     if not eff.shadows:
         return StageDecision("cast_shadow", False, "shadows off in the scene's effects")
-    if eff.sun_direction[2] > -MIN_SUN_ELEVATION_SIN:
+    if sun_above_horizon(eff.sun_direction) is None:
         return StageDecision("cast_shadow", False, "sun at or below the horizon")
     if not frames:
         return StageDecision("cast_shadow", False, "no inserted vehicle (with a size) in any frame")

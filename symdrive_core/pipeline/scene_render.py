@@ -39,13 +39,13 @@ class SceneRenderer:
             bg = read_splats(manifest.resolve(manifest.background_splats))
         self.background = None if bg is None else GaussianTensors.from_gaussians(bg, device=self.device)
         self.actors = {}
-        self.sources = {}  # actor id -> Gaussians as read (what a cast shadow is computed from)
+        self.sources = {}  # inserted actor id -> Gaussians as read (what its cast shadow is computed from)
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
             if g is None and a.splats:
                 g = read_splats(manifest.resolve(a.splats))
             if g is not None:
-                if not isinstance(g, GaussianTensors):
+                if a.kind == "inserted" and not isinstance(g, GaussianTensors):
                     self.sources[a.id] = g
                 self.actors[a.id] = g if isinstance(g, GaussianTensors) else GaussianTensors.from_gaussians(
                     g, device=self.device)
@@ -90,18 +90,14 @@ class SceneRenderer:
                      ratio: float) -> FrameRender:
         """``render`` with the sun shadows of ``actor_ids`` laid on its background
         (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
-        from ..insertion.cast_shadow import combined_occlusion, darken, shadow_map, shadow_window
-        from ..insertion.place import place
-        from ..insertion.shadow import vehicle_ground_z
+        from ..insertion.cast_shadow import combined_occlusion, darken, vehicle_shadow_map
 
         maps = []
         for aid in actor_ids:
             actor = self.manifest.actor(aid)
             pose = actor.pose(frame)
             if aid in self.sources and pose is not None and actor.wlh is not None:
-                maps.append(shadow_map(place(self.sources[aid], pose), sun_direction,
-                                       vehicle_ground_z(pose, actor.wlh),
-                                       bounds=shadow_window(pose, actor.wlh, sun_direction)))
+                maps.append(vehicle_shadow_map(self.sources[aid], pose, actor.wlh, sun_direction))
         maps = [m for m in maps if m is not None]
         if not maps:
             return render

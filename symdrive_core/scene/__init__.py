@@ -18,6 +18,6 @@ from .manifest import (
 from .poses import Pose, interpolate_pose, matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix
 from .visibility import box_corners_world, box_in_frustum, vehicle_local_box
 
-__all__ = ["DEFAULT_SHADOW_RATIO", "Actor", "Camera", "CameraFrame", "Effects", "Frame", "IdMap", "Manifest", "ManifestError", "MaskEntry",
-           "Pose", "box_corners_world", "box_in_frustum", "check_files", "interpolate_pose", "load_manifest",
+__all__ = ["DEFAULT_SHADOW_RATIO", "Actor", "Camera", "CameraFrame", "Effects", "Frame", "IdMap", "Manifest",
+           "ManifestError", "MaskEntry", "Pose", "box_corners_world", "box_in_frustum", "check_files", "interpolate_pose", "load_manifest",
            "matrix_to_quat", "parse_manifest", "quat_multiply", "quat_slerp", "quat_to_matrix", "vehicle_local_box"]
