@@ -21,7 +21,7 @@ def _ints(text: str) -> list[int]:
 
 
 # (steps, n_start, samples) per backend; the built-in one's are measured (symdrive bench accuracy-time)
-# and match pipeline.stages.StageOptions; Flux keeps the paper's.
+# and are pipeline.stages.StageOptions' defaults too; Flux keeps the paper's.
 SAMPLER_DEFAULTS = {"builtin": (5, 4, 8), "flux": (50, 10, 1)}
 
 

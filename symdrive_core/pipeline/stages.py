@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..diffusion.commands import SAMPLER_DEFAULTS
 from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
 from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
 from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS
@@ -24,9 +25,9 @@ class StageOptions:
     # The paper runs Flux 50 steps from step 10 (t = 0.8), one sample. The shipped small restorer
     # measures best with one step from t = 0.2, averaged over 8 samples (`symdrive bench
     # accuracy-time`): its errors add up per step, and the mean of samples cancels their grain.
-    sampler_steps: int = 5
-    n_start: int = 4
-    samples: int = 8
+    sampler_steps: int = SAMPLER_DEFAULTS["builtin"][0]
+    n_start: int = SAMPLER_DEFAULTS["builtin"][1]
+    samples: int = SAMPLER_DEFAULTS["builtin"][2]
     eval_methods: tuple[str, ...] = ("single_view", "ar_d0.5", "ar_d1.0")
     refine_iters: int = 600
     harmonize_steps: int = HARMONIZE_STEPS  # the paper's 50 measure worse with the shipped restorer
