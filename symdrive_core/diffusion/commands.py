@@ -23,6 +23,9 @@ def _ints(text: str) -> list[int]:
 # (steps, n_start, samples) per backend; the built-in one's are measured (symdrive bench accuracy-time)
 # and are pipeline.stages.StageOptions' defaults too; Flux keeps the paper's.
 SAMPLER_DEFAULTS = {"builtin": (5, 4, 8), "flux": (50, 10, 1)}
+# (iterations, densification cap) of each cycle reconstruction (make-pairs --cycle); data.make_pairs'
+# default too. About 1.5 minutes each on the built-in street.
+CYCLE_DEFAULTS = (1000, 60000)
 
 
 def add_commands(sub) -> None:
@@ -37,6 +40,22 @@ def add_commands(sub) -> None:
         "--offsets", type=_floats, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
     )
     p.add_argument("--frames", type=_ints, help="recorded frames (default: the training frames)")
+    p.add_argument(
+        "--cycle",
+        type=_floats,
+        default=[],
+        help="lateral offsets (m, signed) of cycle reconstructions whose renders at the recorded "
+        "cameras become degraded starts (default: none)",
+    )
+    p.add_argument(
+        "--cycle-iters", type=int, default=CYCLE_DEFAULTS[0], help="iterations of each cycle reconstruction"
+    )
+    p.add_argument(
+        "--cycle-max-gaussians",
+        type=int,
+        default=CYCLE_DEFAULTS[1],
+        help="densification cap of each cycle reconstruction",
+    )
     p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
     p.set_defaults(func=_make_pairs)
 
@@ -60,6 +79,12 @@ def add_commands(sub) -> None:
         ),
         ("--full-fraction", float, "share of each batch drawn on all of t in [0, 1] (default 0.1)"),
         ("--output", str, "network output: skip (correction on the condition mean, default) or v"),
+        (
+            "--degraded-fraction",
+            float,
+            "share of each batch started from a degraded render, when the pairs have cycles (default 0.5)",
+        ),
+        ("--init", str, "restorer weights to continue from (default: a fresh network)"),
     ):
         p.add_argument(flag, type=kind, help=text)
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.safetensors")
@@ -123,10 +148,14 @@ def _load_scene(args):
 
 
 def _make_pairs(args) -> int:
+    from .cycle import cycle_config
     from .data import make_pairs
 
     manifest, gaussians = _load_scene(args)
-    out = make_pairs(manifest, gaussians, args.offsets, args.out, frames=args.frames)
+    cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
+    out = make_pairs(
+        manifest, gaussians, args.offsets, args.out, frames=args.frames, cycle_offsets=args.cycle, cycle_config=cycle
+    )
     print(f"wrote {out}")
     return 0
 
@@ -137,7 +166,7 @@ def _train(args) -> int:
 
     cfg = TrainConfig()
     names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
-    for name in (*names, "t_max", "full_fraction", "output"):
+    for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
     record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation)

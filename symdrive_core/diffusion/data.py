@@ -5,10 +5,17 @@ moved d metres left / right along its own x axis); the sample is ``(I_-d, I_d) -
 I_0 the recorded image. The degradation the model learns to undo is therefore exactly the one
 lateral novel views suffer, with no hand-made masks or perturbations.
 
+Optionally each recorded frame also gets *degraded starts*: renders of cycle reconstructions
+(:mod:`.cycle`) at the recorded camera, which carry the artifacts of a lateral view while staying
+aligned with I_0. Training then sometimes starts the noisy state from one of them instead of from
+I_0, as sampling does from the render at the shifted camera.
+
 Pairs are stored as one safetensors file of uint8 images ([N, H, W, 3] ``left``, ``target``,
-``right``) with ``offset`` and ``frame`` per sample; its SHA-256 identifies the training data.
-Batches are random crops (the UNet is fully convolutional) with a mirror augmentation that
-flips all three images and swaps left and right, which is the same street seen in a mirror.
+``right``) with ``offset`` and ``frame`` per sample, plus ``degraded`` [M, H, W, 3] with
+``degraded_frame`` and ``degraded_offset`` when there are cycles; its SHA-256 identifies the
+training data. Batches are random crops (the UNet is fully convolutional) with a mirror
+augmentation that flips the images and swaps left and right, which is the same street seen in a
+mirror.
 """
 
 from __future__ import annotations
@@ -70,9 +77,14 @@ def make_pairs(
     *,
     frames: list[int] | None = None,
     camera: str | None = None,
+    cycle_offsets=(),
+    cycle_config=None,
     progress: bool = True,
 ) -> Path:
-    """Write ``(I_-d, I_d) -> I_0`` for every recorded frame (default: the training frames) and d."""
+    """Write ``(I_-d, I_d) -> I_0`` for every recorded frame (default: the training frames) and d,
+    and the degraded starts of one cycle reconstruction per ``cycle_offsets`` entry (fitted with
+    ``cycle_config``, a :class:`~symdrive_core.optim.reconstruct.ReconstructConfig`; default
+    :func:`.cycle.cycle_config`)."""
     from safetensors.numpy import save_file
     from tqdm import tqdm
 
@@ -81,6 +93,9 @@ def make_pairs(
     offsets = [float(d) for d in offsets]
     if not offsets or any(d <= 0 for d in offsets):
         raise ValueError(f"make_pairs: offsets must be positive distances in metres, got {offsets}")
+    cycle_offsets = [float(d) for d in cycle_offsets]
+    if any(d == 0 for d in cycle_offsets):
+        raise ValueError(f"make_pairs: cycle offsets must be non-zero metres, got {cycle_offsets}")
     cam = manifest.camera(camera) if camera else manifest.cameras[0]
     frames = split_frames(manifest)[0] if frames is None else list(frames)
     render = SplatRenderer(gaussians)
@@ -107,13 +122,26 @@ def make_pairs(
         "offset": np.asarray(offs, np.float32),
         "frame": np.asarray(idx, np.int32),
     }
+    if cycle_offsets:
+        from .cycle import cycle_config as default_cycle_config
+        from .cycle import cycle_renders
+
+        cfg = cycle_config or default_cycle_config()
+        degraded = [cycle_renders(manifest, gaussians, d, frames, cfg, camera=cam.name, progress=progress)
+                    for d in cycle_offsets]
+        tensors["degraded"] = np.concatenate(degraded)
+        tensors["degraded_frame"] = np.tile(np.asarray(frames, np.int32), len(cycle_offsets))
+        tensors["degraded_offset"] = np.repeat(np.asarray(cycle_offsets, np.float32), len(frames))
     meta = {
         "scene": manifest.name,
         "camera": cam.name,
         "offsets": json.dumps(offsets),
         "frames": json.dumps(frames),
         "gaussians": str(len(gaussians)),
+        "cycle_offsets": json.dumps(cycle_offsets),
     }
+    if cycle_offsets:
+        meta["cycle_iters"] = str(cfg.iters)
     out = Path(out)
     with atomic_path(out) as tmp:
         save_file(tensors, str(tmp), metadata=meta)
@@ -152,24 +180,49 @@ class PairSet:
         self.left, self.target, self.right = images("left"), images("target"), images("right")
         self.offset = torch.from_numpy(data.get("offset", np.zeros(len(self.left), np.float32)))
         self.path = path
+        # per pair, the indices of the degraded starts of its recorded frame (empty: none)
+        self.degraded = images("degraded") if "degraded" in data else None
+        frame = data.get("frame", np.arange(len(self.left), dtype=np.int32))
+        by_frame: dict[int, list[int]] = {}
+        for k, f in enumerate(data.get("degraded_frame", np.zeros(0, np.int32)).tolist()):
+            by_frame.setdefault(int(f), []).append(k)
+        self.starts = [by_frame.get(int(f), []) for f in frame.tolist()]
+        if self.degraded is not None and not all(self.starts):
+            raise InputError(path, "degraded starts do not cover every pair's frame", "degraded_frame")
 
     def __len__(self) -> int:
         return len(self.target)
 
-    def batch(self, size: int, crop: int, generator: torch.Generator):
-        """(left, target, right) random crops of ``crop`` px with random mirroring."""
+    @property
+    def has_degraded(self) -> bool:
+        return self.degraded is not None
+
+    def batch(self, size: int, crop: int, generator: torch.Generator, degraded_fraction: float = 0.0):
+        """(left, target, right, start) random crops of ``crop`` px with random mirroring; ``start``
+        is one of the frame's degraded starts for a ``degraded_fraction`` share of the batch (when
+        the file has them), else the target itself."""
         n, _, h, w = self.target.shape
         ch, cw = min(crop, h), min(crop, w)
         idx = torch.randint(0, n, (size,), generator=generator)
         ys = torch.randint(0, h - ch + 1, (size,), generator=generator)
         xs = torch.randint(0, w - cw + 1, (size,), generator=generator)
         flips = torch.rand(size, generator=generator) < 0.5
-        out = ([], [], [])
+        use = torch.zeros(size, dtype=torch.bool)
+        if self.degraded is not None and degraded_fraction > 0:  # no extra draws otherwise: old runs replay
+            use = torch.rand(size, generator=generator) < degraded_fraction
+            pick = torch.rand(size, generator=generator)
+        out = ([], [], [], [])
         for k in range(size):
             i, y, x = int(idx[k]), int(ys[k]), int(xs[k])
-            views = [v[i, :, y : y + ch, x : x + cw] for v in (self.left, self.target, self.right)]
+            views = [v[i] for v in (self.left, self.target, self.right)]
+            if use[k]:
+                choices = self.starts[i]
+                views.append(self.degraded[choices[int(pick[k] * len(choices))]])
+            else:
+                views.append(views[1])
+            views = [v[:, y : y + ch, x : x + cw] for v in views]
             if flips[k]:
-                views = [v.flip(-1) for v in reversed(views)]
+                views = [views[2].flip(-1), views[1].flip(-1), views[0].flip(-1), views[3].flip(-1)]
             for lst, v in zip(out, views):
                 lst.append(v)
         return tuple(torch.stack(v) for v in out)

@@ -29,6 +29,15 @@ def velocity_target(x0: torch.Tensor, eps: torch.Tensor) -> torch.Tensor:
     return eps - x0
 
 
+def start_velocity_target(x0: torch.Tensor, x_start: torch.Tensor, eps: torch.Tensor, t) -> torch.Tensor:
+    """``(z_t - x0) / t`` for ``z_t = (1 - t) x_start + t eps``: the velocity whose Euler step
+    from ``t`` to 0 lands on ``x0``. Equals :func:`velocity_target` when ``x_start`` is ``x0``;
+    ``t`` must be positive wherever the two differ."""
+    t = _broadcast(t, x0)
+    gap = x_start - x0
+    return velocity_target(x0, eps) + torch.where(gap == 0, 0.0, (1.0 - t) / t * gap)
+
+
 def _broadcast(t, like: torch.Tensor) -> torch.Tensor | float:
     if isinstance(t, torch.Tensor) and t.ndim == 1:
         return t.reshape(-1, *([1] * (like.ndim - 1))).to(like.dtype)
@@ -105,16 +114,31 @@ def flow_loss(
     t_max: float = 1.0,
     full_fraction: float = 0.0,
     weight: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    x_start: torch.Tensor | None = None,
+    start_t_min: float = 0.1,
 ) -> torch.Tensor:
     """Mean squared velocity error (the paper's training objective) at ``t`` drawn by
-    :func:`training_times` (uniform on ``[0, 1]`` by default), optionally weighted per sample."""
+    :func:`training_times` (uniform on ``[0, 1]`` by default), optionally weighted per sample.
+
+    ``x_start`` (default ``x0``) is what the noisy state is made from, ``z_t = (1 - t) x_start +
+    t eps``, with the target :func:`start_velocity_target` still leading to ``x0``: samples whose
+    start differs from ``x0`` (a degraded render) learn to repair it, as sampling from ``N_start``
+    must. Their ``t`` is mapped to ``start_t_min + (1 - start_t_min) t``, away from 0, where no
+    step is left to repair anything in."""
     if t_max >= 1.0 and full_fraction == 0.0:
         t = torch.rand(x0.shape[0], generator=generator, dtype=x0.dtype)
     else:
         t = training_times(x0.shape[0], generator, t_max, full_fraction).to(x0.dtype)
     eps = torch.randn(x0.shape, generator=generator, dtype=x0.dtype)
-    v = velocity(noised(x0, eps, t), t)
-    err = ((v - velocity_target(x0, eps)) ** 2).flatten(1).mean(1)
+    if x_start is None:
+        v = velocity(noised(x0, eps, t), t)
+        target = velocity_target(x0, eps)
+    else:
+        repair = (x_start != x0).flatten(1).any(1)
+        t = torch.where(repair, start_t_min + (1.0 - start_t_min) * t, t)
+        v = velocity(noised(x_start, eps, t), t)
+        target = start_velocity_target(x0, x_start, eps, t)
+    err = ((v - target) ** 2).flatten(1).mean(1)
     if weight is not None:
         err = err * weight(t)
     return err.mean()

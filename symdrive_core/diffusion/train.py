@@ -11,6 +11,10 @@ Noise levels are drawn uniformly on ``[0, t_max]`` with a ``full_fraction`` shar
 evaluates the model above it, while RePaint or ``N_start = 0`` still get some coverage. The
 squared velocity error is weighted per sample by ``UNet.loss_weight`` (unit scale for the
 network's correction under the ``skip`` output).
+
+When the pairs file has degraded starts (cycle reconstructions), a ``degraded_fraction`` share
+of each batch starts its noisy state from one of them and learns the velocity back to the
+recorded image (``flow.flow_loss``'s ``x_start``). ``init`` continues from trained weights.
 """
 
 from __future__ import annotations
@@ -23,10 +27,11 @@ from pathlib import Path
 
 import torch
 
+from ..errors import InputError
 from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
 from .data import PairSet, file_sha256
-from .models import BuiltinRestorer, save_builtin
+from .models import BuiltinRestorer, load_builtin, save_builtin
 from .unet import UNet, UNetConfig
 
 CHECKPOINT = "checkpoint.safetensors"
@@ -52,6 +57,10 @@ class TrainConfig:
     # The default sampler (50 steps, N_start 10, no shift) starts at t = 0.8.
     t_max: float = 0.85
     full_fraction: float = 0.1
+    # share of samples whose noisy state starts from a degraded render (pairs files with cycles)
+    degraded_fraction: float = 0.5
+    start_t_min: float = 0.1  # their lowest noise level (see flow.flow_loss)
+    init: str | None = None  # restorer weights to start from (default: a fresh network)
 
     def unet(self) -> UNetConfig:
         return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output)
@@ -129,6 +138,11 @@ def train_restorer(
     data = PairSet(pairs)
     torch.manual_seed(cfg.seed)
     net = UNet(cfg.unet())
+    if cfg.init:
+        start_from = load_builtin(cfg.init).net
+        if start_from.config != net.config:
+            raise InputError(cfg.init, f"its UNet {start_from.config} is not the one configured ({net.config})")
+        net.load_state_dict(start_from.state_dict())
     ema = UNet(cfg.unet())
     ema.load_state_dict(net.state_dict())
     ema.requires_grad_(False)
@@ -149,7 +163,7 @@ def train_restorer(
     )
     for step in bar:
         g = step_generator(cfg.seed, step)
-        left, target, right = data.batch(cfg.batch, cfg.crop, g)
+        left, target, right, start_image = data.batch(cfg.batch, cfg.crop, g, cfg.degraded_fraction)
         lat = model.latent
         zl, zr = lat.encode(left), lat.encode(right)
         loss = flow.flow_loss(
@@ -159,6 +173,8 @@ def train_restorer(
             t_max=cfg.t_max,
             full_fraction=cfg.full_fraction,
             weight=net.loss_weight,
+            x_start=lat.encode(start_image) if data.has_degraded else None,
+            start_t_min=cfg.start_t_min,
         )
         for group in opt.param_groups:
             group["lr"] = learning_rate(cfg, step)
@@ -180,7 +196,7 @@ def train_restorer(
             "file": Path(pairs).name,
             "sha256": file_sha256(pairs),
             "pairs": len(data),
-            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets") if k in data.metadata},
+            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets", "cycle_offsets") if k in data.metadata},
         },
         "steps": cfg.steps,
         "resumed_from": start,

@@ -280,33 +280,26 @@ class ReconstructResult:
     output: Path
 
 
-def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
-                resume: bool = False, progress: bool = True) -> ReconstructResult:
-    """Fit background Gaussians to the training frames; write ``out/background.ply``,
-    ``out/checkpoint/`` and ``out/metrics.json`` (held-out PSNR/SSIM, timings)."""
+def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *, checkpoint: Checkpoint | None = None,
+        resume: bool = False, progress: bool = True, desc: str = "reconstruct") -> tuple[Gaussians, dict]:
+    """Optimise ``initial`` against ``views``: the training loop with density control (``initial``
+    is None only when resuming from ``checkpoint``). Returns the Gaussians and a log (start
+    iteration, seconds, scene extent, densification steps)."""
     from tqdm import tqdm
 
-    from .evaluate import evaluate_heldout
-
-    cfg = cfg or ReconstructConfig()
-    out = Path(out)
-    train_frames, heldout = split_frames(manifest, cfg.holdout_every)
-    views = load_views(manifest, train_frames, depth=True)
     extent, centre = scene_extent(views)
-    ckpt = Checkpoint(out / "checkpoint")
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
-    if resume and ckpt.exists():
-        params, opt, stats, start = ckpt.load(cfg, extent)
+    if resume and checkpoint is not None and checkpoint.exists():
+        params, opt, stats, start = checkpoint.load(cfg, extent)
     else:
-        params = params_from_gaussians(initial_gaussians(manifest, views, cfg), cfg.sh_degree)
+        params = params_from_gaussians(initial, cfg.sh_degree)
         opt = make_optimizer(params, cfg, extent)
         stats, start = GradStats(len(params["means"])), 0
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
-    log = {"densify": []}
+    log = {"resumed_from": start, "extent_m": round(extent, 3), "densify": []}
     t0 = time.perf_counter()
-    bar = tqdm(range(start, cfg.iters), desc="reconstruct", unit="it", disable=not progress, initial=start,
-               total=cfg.iters)
+    bar = tqdm(range(start, cfg.iters), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
     for it in bar:
         epoch, pos = divmod(it, len(views))
         order = np.random.default_rng((cfg.seed, epoch)).permutation(len(views))
@@ -335,16 +328,32 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                 opt, params, stats, cfg.densify, extent, centre, generator)})
         if step % 20 == 0:
             bar.set_postfix(loss=f"{loss.item():.4f}", n=len(params["means"]))
-        if step % cfg.checkpoint_every == 0 or step == cfg.iters:
-            ckpt.save(params, opt, stats, step, cfg)
+        if checkpoint is not None and (step % cfg.checkpoint_every == 0 or step == cfg.iters):
+            checkpoint.save(params, opt, stats, step, cfg)
     bar.close()
-    seconds = time.perf_counter() - t0
-    g = gaussians_from_params(params)
+    log["seconds"] = time.perf_counter() - t0
+    return gaussians_from_params(params), log
+
+
+def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
+                resume: bool = False, progress: bool = True) -> ReconstructResult:
+    """Fit background Gaussians to the training frames; write ``out/background.ply``,
+    ``out/checkpoint/`` and ``out/metrics.json`` (held-out PSNR/SSIM, timings)."""
+    from .evaluate import evaluate_heldout
+
+    cfg = cfg or ReconstructConfig()
+    out = Path(out)
+    train_frames, heldout = split_frames(manifest, cfg.holdout_every)
+    views = load_views(manifest, train_frames, depth=True)
+    checkpoint = Checkpoint(out / "checkpoint")
+    initial = None if resume and checkpoint.exists() else initial_gaussians(manifest, views, cfg)
+    g, log = fit(views, initial, cfg, checkpoint=checkpoint, resume=resume, progress=progress)
+    seconds, start = log["seconds"], log["resumed_from"]
     write_splats(out / "background.ply", g)
     metrics = {"iterations": cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
-               "extent_m": round(extent, 3), "densify": log["densify"]}
+               "extent_m": log["extent_m"], "densify": log["densify"]}
     if heldout:
         metrics["heldout"] = evaluate_heldout(manifest, g, heldout)
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")

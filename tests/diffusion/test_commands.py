@@ -23,7 +23,10 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     write_splats(ply, truth)
     pairs = tmp_path / "pairs.safetensors"
     assert (
-        main(["make-pairs", str(root), "--gaussians", str(ply), "--offsets", "0.5,1", "--out", str(pairs)])
+        main(
+            ["make-pairs", str(root), "--gaussians", str(ply), "--offsets", "0.5,1", "--out", str(pairs),
+             "--cycle=-1,1", "--cycle-iters", "10", "--cycle-max-gaussians", "5000"]
+        )
         == 0
     )
     assert (
@@ -43,6 +46,8 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
                 "2",
                 "--threads",
                 "1",
+                "--degraded-fraction",
+                "1",
             ]
         )
         == 0
@@ -50,6 +55,7 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     weights = tmp_path / "run" / "restorer.safetensors"
     record = json.loads((tmp_path / "run" / "restorer.json").read_text())
     assert record["command"].startswith("symdrive ") and record["steps"] == 3
+    assert record["data"]["cycle_offsets"] == [-1.0, 1.0] and record["config"]["degraded_fraction"] == 1.0
 
     common = [
         "--gaussians",

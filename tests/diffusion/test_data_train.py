@@ -55,7 +55,8 @@ def synthetic_pairs(path, n=6, h=20, w=28, seed=0):
 
 def test_batches_mirror_by_flipping_and_swapping(tmp_path):
     data = PairSet(synthetic_pairs(tmp_path / "p.safetensors"))
-    left, target, right = data.batch(64, 12, torch.Generator().manual_seed(0))
+    left, target, right, start = data.batch(64, 12, torch.Generator().manual_seed(0))
+    assert torch.equal(start, target)  # no degraded starts in this file
     assert left.shape == (64, 3, 12, 12)
     crops = {}
     for i in range(len(data)):
@@ -127,3 +128,27 @@ def test_training_learns_the_pair_to_centre_mapping(tmp_path):
     err = float(((out - held.target) ** 2).mean())
     assert err < float(((held.left - held.target) ** 2).mean())
     assert err < float(((held.right - held.target) ** 2).mean())
+
+
+def test_training_continues_from_init_weights_and_records_cycles(tmp_path):
+    pairs = synthetic_pairs(tmp_path / "p.safetensors")
+    first = tmp_path / "a"
+    train_restorer(pairs, first, TrainConfig(steps=3, **CFG), progress=False)
+    # degraded starts: each frame gets one noisy copy of its target
+    data = load_file(str(pairs))
+    rng = np.random.default_rng(0)
+    noisy = np.clip(data["target"].astype(int) + rng.integers(-40, 40, data["target"].shape), 0, 255)
+    data |= {"frame": np.arange(6, dtype=np.int32), "degraded": noisy.astype(np.uint8),
+             "degraded_frame": np.arange(6, dtype=np.int32), "degraded_offset": np.ones(6, np.float32)}
+    save_file(data, str(tmp_path / "cyc.safetensors"), metadata={"cycle_offsets": "[1.0]"})
+    frozen = {**CFG, "lr": 0.0}  # no learning: the result must be the init itself
+    record = train_restorer(tmp_path / "cyc.safetensors", tmp_path / "b",
+                            TrainConfig(steps=2, init=str(first / "restorer.safetensors"), **frozen), progress=False)
+    a = load_builtin(first / "restorer.safetensors").net.state_dict()
+    b = load_builtin(tmp_path / "b" / "restorer.safetensors").net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert record["data"]["cycle_offsets"] == [1.0] and record["config"]["init"].endswith("restorer.safetensors")
+    assert np.isfinite(record["final_loss"])
+    with pytest.raises(InputError, match="not the one configured"):
+        train_restorer(pairs, tmp_path / "c", TrainConfig(steps=1, init=str(first / "restorer.safetensors"),
+                                                          **{**CFG, "width": 16}), progress=False)

@@ -110,3 +110,33 @@ def test_averaging_k_samples_divides_the_seed_variance_by_about_k():
 
     ratio = spread(1) / spread(8)
     assert 4.0 < ratio < 16.0
+
+
+def test_a_step_from_a_degraded_start_lands_on_the_data():
+    g = torch.Generator().manual_seed(3)
+    x0, start, eps = (torch.rand(2, 3, 5, 6, generator=g) for _ in range(3))
+    t = torch.tensor([0.2, 0.7])
+    z = flow.noised(start, eps, t)
+    v = flow.start_velocity_target(x0, start, eps, t)
+    assert torch.allclose(z - t.reshape(-1, 1, 1, 1) * v, x0, atol=1e-6)
+    # from the data itself it is the plain flow target, even at t = 0
+    zero = torch.tensor([0.0, 0.5])
+    assert torch.equal(flow.start_velocity_target(x0, x0, eps, zero), flow.velocity_target(x0, eps))
+
+
+def test_flow_loss_from_degraded_starts_keeps_them_away_from_t_zero():
+    g = torch.Generator().manual_seed(4)
+    x0 = torch.rand(64, 3, 4, 4, generator=g)
+    start = x0.clone()
+    start[:32] = torch.rand(32, 3, 4, 4, generator=g)  # the first half starts degraded
+    seen = {}
+
+    def exact(z, t):  # the velocity that leads each state to x0
+        seen["t"] = t
+        return (z - x0) / t.reshape(-1, 1, 1, 1)
+
+    loss = flow.flow_loss(exact, x0, torch.Generator().manual_seed(0), t_max=0.85, x_start=start, start_t_min=0.1)
+    assert float(loss) < 1e-8
+    t = seen["t"]
+    assert float(t[:32].min()) >= 0.1 and float(t[32:].min()) < 0.1
+    assert float(t.max()) <= 0.1 + 0.9 * 0.85 + 1e-6
