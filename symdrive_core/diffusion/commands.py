@@ -6,6 +6,7 @@ that need no diffusion model never pay for (or depend on) them.
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 
@@ -18,6 +19,20 @@ def _floats(text: str) -> list[float]:
 
 def _ints(text: str) -> list[int]:
     return [int(v) for v in _floats(text)]
+
+
+def _distances(text: str) -> list[float]:
+    values = _floats(text)
+    if not values or any(v <= 0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive distances in metres, got {text!r}")
+    return values
+
+
+def _signed_offsets(text: str) -> list[float]:
+    values = _floats(text)
+    if any(v == 0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected non-zero signed offsets in metres, got {text!r}")
+    return values
 
 
 # (steps, n_start, samples) per backend; the built-in one's are measured (symdrive bench accuracy-time)
@@ -37,12 +52,12 @@ def add_commands(sub) -> None:
         "--gaussians", type=Path, help="reconstruction PLY (default: the manifest's background splats)"
     )
     p.add_argument(
-        "--offsets", type=_floats, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
+        "--offsets", type=_distances, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
     )
     p.add_argument("--frames", type=_ints, help="recorded frames (default: the training frames)")
     p.add_argument(
         "--cycle",
-        type=_floats,
+        type=_signed_offsets,
         default=[],
         help="lateral offsets (m, signed) of cycle reconstructions whose renders at the recorded "
         "cameras become degraded starts (default: none)",

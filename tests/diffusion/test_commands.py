@@ -2,6 +2,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from symdrive_core.cli import main
 from symdrive_core.io.ply import write_splats
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
@@ -124,3 +126,13 @@ def test_flux_backend_without_files_fails_with_the_list(synthetic_package, tmp_p
     )
     err = capsys.readouterr().err
     assert "not given: transformer, lora, prompt" in err
+
+
+def test_make_pairs_rejects_bad_offsets_before_any_work(tmp_path, capsys):
+    out = tmp_path / "pairs.safetensors"
+    for flag in ("--cycle=0", "--cycle=1,0", "--offsets=-1", "--offsets=0.5,0"):
+        with pytest.raises(SystemExit) as exc:
+            main(["make-pairs", str(tmp_path / "no-package"), flag, "--out", str(out)])
+        assert exc.value.code == 2
+        assert f"argument {flag.split('=')[0]}" in capsys.readouterr().err
+    assert not out.exists()
