@@ -292,6 +292,8 @@ def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *,
     generator = torch.Generator().manual_seed(cfg.seed)
     if resume and checkpoint is not None and checkpoint.exists():
         params, opt, stats, start = checkpoint.load(cfg, extent)
+    elif initial is None:
+        raise ValueError("fit: no initial Gaussians and no checkpoint to resume from")
     else:
         params = params_from_gaussians(initial, cfg.sh_degree)
         opt = make_optimizer(params, cfg, extent)

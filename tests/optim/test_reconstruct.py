@@ -84,3 +84,13 @@ def test_missing_point_cloud_is_a_clear_error(synthetic_package, tmp_path):
     m.background_points = None
     with pytest.raises(InputError, match="background.points"):
         reconstruct(m, tmp_path, _cfg(iters=5), progress=False)
+
+
+def test_fit_needs_initial_gaussians_or_a_checkpoint(synthetic_package, tmp_path):
+    from symdrive_core.optim.reconstruct import fit
+
+    root, _ = synthetic_package
+    m = load_manifest(root)
+    views = load_views(m, split_frames(m)[0])
+    with pytest.raises(ValueError, match="no initial Gaussians"):
+        fit(views, None, _cfg(), checkpoint=Checkpoint(tmp_path / "none"), resume=True, progress=False)
