@@ -151,13 +151,23 @@ class CastShadow:
         return darken(image, self.background, vehicle_alpha, self.occlusion, self.ratio)
 
 
+def union(layers) -> np.ndarray:
+    """``1 - prod(1 - a)`` over same-shaped coverages in [0, 1] (float64): light passes each in turn."""
+    through = None
+    for a in layers:
+        passed = 1.0 - np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0)
+        through = passed if through is None else through * passed
+    if through is None:
+        raise ValueError("union: no layers")
+    return 1.0 - through
+
+
 def combined_occlusion(maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, width: int, height: int,
                        surface_depth: np.ndarray | None = None) -> np.ndarray:
-    """Occlusion [H, W] of several vehicles' shadows: light passes each one in turn."""
-    through = np.ones((height, width), np.float64)
-    for smap in maps:
-        through *= 1.0 - occlusion_image(smap, c2w, K, width, height, surface_depth)
-    return (1.0 - through).astype(np.float32)
+    """Occlusion [H, W] of several vehicles' shadows."""
+    if not maps:
+        return np.zeros((height, width), np.float32)
+    return union(occlusion_image(smap, c2w, K, width, height, surface_depth) for smap in maps).astype(np.float32)
 
 
 def vehicle_shadow_map(vehicle: Gaussians, pose: Pose, wlh, sun_direction) -> ShadowMap | None:

@@ -90,7 +90,7 @@ class SceneRenderer:
                      ratio: float) -> FrameRender:
         """``render`` with the sun shadows of ``actor_ids`` laid on its background
         (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
-        from ..insertion.cast_shadow import combined_occlusion, darken, vehicle_shadow_map
+        from ..insertion.cast_shadow import combined_occlusion, darken, union, vehicle_shadow_map
 
         maps = []
         for aid in actor_ids:
@@ -107,8 +107,6 @@ class SceneRenderer:
         occlusion = combined_occlusion(maps, cf.camera_to_world, cf.K, cam.width, cam.height, background.depth)
         if not (occlusion > 0).any():
             return replace(render, shadow=occlusion)
-        through = np.ones_like(occlusion, dtype=np.float64)
-        for a in render.instance.values():
-            through *= 1.0 - np.clip(a, 0.0, 1.0)
-        rgb = darken(render.rgb, background.rgb, 1.0 - through, occlusion, ratio)
+        vehicles = union(render.instance.values()) if render.instance else np.zeros_like(occlusion, np.float64)
+        rgb = darken(render.rgb, background.rgb, vehicles, occlusion, ratio)
         return replace(render, rgb=rgb, shadow=occlusion)
