@@ -162,20 +162,22 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dic
     placements = held_out_placements(manifest)
     finetuned = sorted((out / "insertion_assets").glob("*.ply"))
     if placements and finetuned:
+        from ..insertion.composite import render_insertion
         from ..insertion.evaluate import insert_frame
 
         p = placements[0]
         bg_t = GaussianTensors.from_gaussians(background)
         asset = load_vehicle_asset(manifest.resolve(p.asset))
-        panels = [("naive insertion", insert_frame(manifest, bg_t, asset.gaussians, p.pose, p.wlh, p.camera).plain)]
+        panels = [("naive insertion", render_insertion(p.camera, bg_t, asset.gaussians, p.pose)[0])]
         harmonized = output_path(out, "harmonize", p.camera_name, p.frame)
         if harmonized.exists():
             panels.append(("harmonized (RePaint)", read_image(harmonized, channels=3)))
-        tuned = insert_frame(manifest, bg_t, read_splats(finetuned[0]), p.pose, p.wlh, p.camera)
+        tuned_asset = read_splats(finetuned[0])
+        tuned = insert_frame(manifest, bg_t, tuned_asset, p.pose, p.wlh, p.camera)
         panels += [("fine-tuned asset" + (" + shadow" if tuned.shadow is not None else ""), tuned.image),
                    ("Cycles, car truly in scene", read_image(manifest.resolve(p.with_image), channels=3))]
         _montage(figures / "insertion.png", panels)
-        paths = render_trajectory(manifest, bg_t, read_splats(finetuned[0]), p.wlh, out / "trajectory", progress)
+        paths = render_trajectory(manifest, bg_t, tuned_asset, p.wlh, out / "trajectory", progress)
         picks = paths[:: max(1, len(paths) // 4)][:4]
         _montage(figures / "trajectory.png", [(f"frame {int(q.stem)}", read_image(q, channels=3)) for q in picks])
     report["demo_seconds"] = round(time.perf_counter() - t0, 1)
