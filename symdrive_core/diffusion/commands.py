@@ -114,10 +114,12 @@ def add_commands(sub) -> None:
         "--offsets",
         type=_floats,
         default=[0.5, 1.0, 1.5, 2.0, 3.0],
-        help="metres; each is restored on both sides",
+        help="metres; each is restored on both sides (with --evaluate, the views --refine trains on; "
+             "scoring covers every offset with ground truth)",
     )
     p.add_argument("--step", type=float, default=0.5, help="chain step d in metres (0 = single-view)")
-    p.add_argument("--frames", type=_ints, help="recorded frames (default: all)")
+    p.add_argument("--frames", type=_ints,
+                   help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=int, help="sampler steps (default: 5 builtin, 50 flux)")
     p.add_argument("--n-start", type=int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
     p.add_argument("--seed", type=int, default=0)
@@ -135,7 +137,9 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=int, default=600)
+    p.add_argument("--refine-iters", type=int, default=900)
+    p.add_argument("--refine-frames", type=_ints,
+                   help="recorded frames whose restored lateral views --refine trains on (default: all)")
     p.add_argument("--backend", choices=["builtin", "flux"], default="builtin")
     p.add_argument("--weights", type=Path, help="built-in restorer weights (default: the shipped ones)")
     p.add_argument("--flux-transformer", help="FLUX.1-dev transformer folder (diffusers layout)")
@@ -229,37 +233,19 @@ def _restore(args) -> int:
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
-    from tqdm import tqdm
-
-    from .. import conventions
     from ..io.images import write_image
-    from .data import SplatRenderer
-    from .restore import LateralChain
+    from .restore import lateral_camera, restore_lateral_views
 
-    cam = manifest.cameras[0]
+    cam = lateral_camera(manifest)
     frames = args.frames if args.frames is not None else list(range(len(cam.frames)))
-    render = SplatRenderer(gaussians)
-    offsets = sorted({s * abs(o) for o in args.offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
-    views = []
-    for fi in tqdm(frames, desc="restore", unit="frame"):
-        cf = cam.frames[fi]
-        chain = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
-        for off in offsets:
-            rel = f"{off:+.2f}/{fi:06d}.png"
-            write_image(args.out / rel, chain.restore(off, args.step))
-            c2w = conventions.lateral_shift(cf.camera_to_world, off)
-            views.append(
-                {
-                    "frame": fi,
-                    "offset_m": off,
-                    "image": rel,
-                    "K": cf.K.tolist(),
-                    "camera_to_world": c2w.tolist(),
-                    "width": cam.width,
-                    "height": cam.height,
-                }
-            )
-    return {"camera": cam.name, "step_m": args.step, "sampler": vars(sampler), "views": views}
+    views = restore_lateral_views(manifest, gaussians, restorer, frames, args.offsets, args.step, sampler=sampler)
+    index = []
+    for v in views:
+        rel = f"{v.offset_m:+.2f}/{v.frame:06d}.png"
+        write_image(args.out / rel, v.image)
+        index.append({"frame": v.frame, "offset_m": v.offset_m, "image": rel, "K": v.K.tolist(),
+                      "camera_to_world": v.camera_to_world.tolist(), "width": v.width, "height": v.height})
+    return {"camera": cam.name, "step_m": args.step, "sampler": vars(sampler), "views": index}
 
 
 def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
@@ -277,17 +263,25 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
     if args.refine:
         from .refine import RefineConfig, refine_gaussians
+        from .restore import lateral_camera, restore_lateral_views
 
-        method = f"ar_d{args.step}"
-        if method not in result.views:
-            raise SystemExit(f"--refine uses the restored views of {method}: pass --step 0.5 or 1.0")
+        # As the pipeline does: the lateral views of every recorded frame (not only the scored
+        # ones) at --offsets, restored by the chain with --step; scored chains are reused.
+        frames = args.refine_frames
+        if frames is None:
+            frames = list(range(len(lateral_camera(manifest).frames)))
+        t0 = time.perf_counter()
+        views = restore_lateral_views(manifest, gaussians, restorer, frames, args.offsets, args.step,
+                                      sampler=sampler, chains=result.chains)
+        restore_seconds = round(time.perf_counter() - t0, 1)
         cfg = RefineConfig(iters=args.refine_iters)
-        refined, stats = refine_gaussians(manifest, gaussians, result.views[method], cfg)
+        refined, stats = refine_gaussians(manifest, gaussians, views, cfg)
         write_splats(args.out / "refined.ply", refined)
         # The control: the same refinement on the recorded views alone, so the table shows what
         # the restored views add beyond training the reconstruction longer.
         control, control_stats = refine_gaussians(manifest, gaussians, [], cfg)
-        metrics["refine"] = {**stats, "views_from": method, "control_seconds": control_stats["seconds"]}
+        metrics["refine"] = {**stats, "step_m": args.step, "frames": frames, "offsets_m": list(args.offsets),
+                             "restore_seconds": restore_seconds, "control_seconds": control_stats["seconds"]}
         metrics["lateral"] += score_gaussians(manifest, refined, "refined", args.frames)
         metrics["lateral"] += score_gaussians(manifest, control, "refined_recorded_only", args.frames)
     return metrics

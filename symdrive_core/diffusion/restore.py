@@ -80,10 +80,12 @@ class LateralChain:
     @classmethod
     def for_frame(cls, manifest: Manifest, cam, frame: int, restorer, render: SplatRenderer,
                   sampler: SamplerConfig = DEFAULT) -> LateralChain:
-        """The chain around recorded frame ``frame`` of the package's camera ``cam``."""
+        """The chain around recorded frame ``frame`` of the package's camera ``cam``; a frame with
+        no recorded image starts from the render at its camera."""
         cf = cam.frames[frame]
-        return cls(restorer, render, read_image(manifest.resolve(cf.image), channels=3),
-                   Camera(cf.K, cf.camera_to_world, cam.width, cam.height), sampler)
+        recorded = (read_image(manifest.resolve(cf.image), channels=3) if cf.image
+                    else render(cf.K, cf.world_to_camera, cam.width, cam.height))
+        return cls(restorer, render, recorded, Camera(cf.K, cf.camera_to_world, cam.width, cam.height), sampler)
 
     def raw(self, offset: float) -> np.ndarray:
         key = round(offset, 6)
@@ -137,6 +139,47 @@ class RestoredView:
 class LateralRestoration:
     rows: list[dict]
     views: dict[str, list[RestoredView]] = field(default_factory=dict)
+    chains: dict[int, LateralChain] = field(default_factory=dict)  # by frame, their restorations cached
+
+
+def lateral_camera(manifest: Manifest):
+    """The camera whose views are shifted sideways: the ground truth's, else the first."""
+    return manifest.camera((manifest.ground_truth or {}).get("camera", manifest.cameras[0].name))
+
+
+def restore_lateral_views(
+    manifest: Manifest,
+    gaussians: Gaussians,
+    restorer,
+    frames: list[int],
+    offsets: list[float],
+    step: float,
+    *,
+    sampler: SamplerConfig = DEFAULT,
+    chains: dict[int, LateralChain] | None = None,
+    progress: bool = True,
+) -> list[RestoredView]:
+    """The views at ``+-offsets`` of each recorded frame in ``frames`` (the lateral camera), restored
+    by the chain with step ``step``; ``chains`` (by frame) are reused, so views already restored
+    while scoring are not sampled again. Refinement trains on these."""
+    from tqdm import tqdm
+
+    cam = lateral_camera(manifest)
+    render = SplatRenderer(gaussians)
+    chains = {} if chains is None else chains
+    signed = sorted({s * abs(o) for o in offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
+    views = []
+    for fi in tqdm(frames, desc="restore", unit="frame", disable=not progress):
+        if fi not in chains:
+            chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
+        cf = cam.frames[fi]
+        for off in signed:
+            c2w = conventions.lateral_shift(cf.camera_to_world, off)
+            views.append(
+                RestoredView(fi, off, cf.K, c2w, conventions.invert_rigid(c2w), cam.width, cam.height,
+                             chains[fi].restore(off, step))
+            )
+    return views
 
 
 def run_lateral_restoration(
@@ -156,7 +199,7 @@ def run_lateral_restoration(
     targets = _targets(manifest, frames)
     steps = {m: method_step(m) for m in methods}
     render = SplatRenderer(gaussians)
-    cam = manifest.camera(manifest.ground_truth.get("camera", manifest.cameras[0].name))
+    cam = lateral_camera(manifest)
     scores: dict[tuple[float, str], list] = {}
     seconds: dict[str, list[float]] = {}
     result = LateralRestoration(rows=[])
@@ -165,7 +208,7 @@ def run_lateral_restoration(
         by_frame.setdefault(v.frame, []).append(v)
     bar = tqdm(total=len(targets) * len(methods), desc="restore", unit="view", disable=not progress)
     for fi, views in sorted(by_frame.items()):
-        chain = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
+        chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
         for v in sorted(views, key=lambda v: abs(v.offset_m)):
             gt = read_image(manifest.resolve(v.image), channels=3)
             for method, step in steps.items():

@@ -29,7 +29,7 @@ class StageOptions:
     n_start: int = SAMPLER_DEFAULTS["builtin"][1]
     samples: int = SAMPLER_DEFAULTS["builtin"][2]
     eval_methods: tuple[str, ...] = ("single_view", "ar_d0.5", "ar_d1.0")
-    refine_iters: int = 600
+    refine_iters: int = 900
     harmonize_steps: int = HARMONIZE_STEPS  # the paper's 50 measure worse with the shipped restorer
     harmonize_start: float = HARMONIZE_START  # start this fraction of the way down, from the noised render
     harmonize_samples: int = HARMONIZE_SAMPLES
@@ -91,9 +91,9 @@ def restore_stage(ctx) -> dict:
     from .. import conventions
     from ..diffusion.data import SplatRenderer
     from ..diffusion.restore import (
-        Camera,
         LateralChain,
         RestoredView,
+        lateral_camera,
         run_lateral_restoration,
         score_gaussians,
     )
@@ -105,7 +105,8 @@ def restore_stage(ctx) -> dict:
     g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
     default = f"ar_d{opts.ar_step:g}" if opts.ar_step > 0 else "single_view"
     offsets = m.effects.lateral_offsets if opts.offsets is None else list(opts.offsets)
-    done: set[tuple[int, float]] = set()
+    done: set[tuple[str, int, float]] = set()
+    chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
     if ctx.plan.runs("evaluate") and _has_lateral_truth(m):
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
@@ -113,23 +114,23 @@ def restore_stage(ctx) -> dict:
                                       progress=ctx.progress)
         ctx.report.metrics["lateral"] = score_gaussians(scored, g, "raw_3dgs", opts.frames) + res.rows
         ctx.shared.restored = list(res.views[default])
+        cam_name = lateral_camera(m).name
+        chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
         for v in ctx.shared.restored:
-            write_image(output_path(ctx.out, "restore", f"{m.cameras[0].name}/{v.offset_m:+g}", v.frame), v.image)
-            done.add((v.frame, round(v.offset_m, 6)))
+            write_image(output_path(ctx.out, "restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
+            done.add((cam_name, v.frame, round(v.offset_m, 6)))
     render = SplatRenderer(g)
     jobs = [(cam, fi, off) for cam in m.cameras for fi in (opts.frames or range(len(cam.frames)))
-            for off in offsets if (fi, round(off, 6)) not in done]
+            for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
         path = output_path(ctx.out, "restore", f"{cam.name}/{off:+g}", fi)
         cf = cam.frames[fi]
         if path.exists():
             image = read_image(path, channels=3)
         else:
-            recorded = read_image(m.resolve(cf.image), channels=3) if cf.image else render(
-                cf.K, cf.world_to_camera, cam.width, cam.height)
-            chain = LateralChain(model, render, recorded, Camera(cf.K, cf.camera_to_world, cam.width, cam.height),
-                                 sampler)
-            image = chain.restore(off, opts.ar_step)
+            if (cam.name, fi) not in chains:
+                chains[cam.name, fi] = LateralChain.for_frame(m, cam, fi, model, render, sampler)
+            image = chains[cam.name, fi].restore(off, opts.ar_step)
             write_image(path, image)
         c2w = conventions.lateral_shift(cf.camera_to_world, off)
         ctx.shared.restored.append(RestoredView(fi, off, cf.K, c2w, conventions.invert_rigid(c2w), cam.width,

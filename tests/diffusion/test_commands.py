@@ -84,17 +84,29 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
                 "--refine",
                 "--refine-iters",
                 "2",
+                "--offsets",
+                "0.5,1",
             ]
         )
         == 0
     )
-    rows = json.loads((out / "metrics.json").read_text())["lateral"]
+    metrics = json.loads((out / "metrics.json").read_text())
+    # refinement trains on the restored views of every recorded frame, not only the scored ones
+    assert metrics["refine"]["frames"] == list(range(6)) and metrics["refine"]["restored_views"] == 6 * 4
+    rows = metrics["lateral"]
     assert {(r["offset_m"], r["method"]) for r in rows} == {
         (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "refined",
                                         "refined_recorded_only")
     }
     assert all(r["frames"] == 3 and 0 < r["ssim"] <= 1 for r in rows)
     assert (out / "refined.ply").exists()
+    out = tmp_path / "eval-some"
+    argv = ["restore", str(root), *common, "--out", str(out), "--evaluate", "--frames", "0", "--refine",
+            "--refine-iters", "1", "--refine-frames", "0,3", "--offsets", "0.5", "--step", "0"]
+    assert main(argv) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["refine"]["frames"] == [0, 3] and metrics["refine"]["restored_views"] == 2 * 2
+    assert metrics["refine"]["step_m"] == 0.0  # single-view restorations serve refinement as well
 
     out = tmp_path / "views"
     assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4"]) == 0

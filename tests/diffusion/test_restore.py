@@ -4,6 +4,7 @@ import pytest
 from symdrive_core import conventions
 from symdrive_core.diffusion.restore import Camera, LateralChain, chain_positions, method_step
 from symdrive_core.diffusion.sampler import SamplerConfig
+from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 
 class OffsetRenderer:
@@ -95,3 +96,28 @@ def test_camera_shift_matches_conventions():
     c2w = np.eye(4)
     cam = Camera(np.eye(3), c2w, 4, 4)
     assert np.allclose(cam.shifted(2.0), conventions.lateral_shift(c2w, 2.0))
+
+
+def test_lateral_views_of_every_frame_reuse_the_scored_chains(synthetic_package):  # noqa: F811
+    """Refinement's views come from one chain per frame; chains built while scoring are reused."""
+    from symdrive_core.diffusion.restore import restore_lateral_views, run_lateral_restoration
+    from symdrive_core.scene import load_manifest
+
+    root, truth = synthetic_package
+    manifest = load_manifest(root)
+    restorer = RecordingRestorer()
+    sampler = SamplerConfig(steps=1, n_start=0)
+    scored = run_lateral_restoration(manifest, truth, restorer, methods=("ar_d0.5",), sampler=sampler,
+                                     frames=[0], progress=False)
+    assert scored.chains[0].samples == 2  # +-0.5 m
+    views = restore_lateral_views(manifest, truth, restorer, [0, 3], [1.0, 0.5], 0.5, sampler=sampler,
+                                  chains=scored.chains, progress=False)
+    assert [(v.frame, v.offset_m) for v in views] == [
+        (f, o) for f in (0, 3) for o in (-0.5, 0.5, -1.0, 1.0)
+    ]
+    assert scored.chains[0].samples == 4 and scored.chains[3].samples == 4  # frame 0 sampled +-0.5 once
+    scored_images = {v.offset_m: v.image for v in scored.views["ar_d0.5"]}
+    assert all(v.image is scored_images[v.offset_m] for v in views[:2])  # the very restorations scored
+    shifted = conventions.lateral_shift(manifest.cameras[0].frames[3].camera_to_world, 1.0)
+    assert np.allclose(views[-1].camera_to_world, shifted)
+    assert np.allclose(views[-1].world_to_camera @ shifted, np.eye(4), atol=1e-9)
