@@ -204,6 +204,7 @@ def _restore(args) -> int:
 
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
+    _check_frames(manifest, args)
     restorer = load_restorer(
         args.backend,
         args.weights,
@@ -230,6 +231,19 @@ def _restore(args) -> int:
     write_text_atomic(args.out / "restored.json", json.dumps(index, indent=1) + "\n")
     print(f"wrote {len(index['views'])} restored views to {args.out}")
     return 0
+
+
+def _check_frames(manifest, args) -> None:
+    """--frames / --refine-frames must name frames of the camera that is shifted sideways."""
+    from ..errors import InputError
+    from .restore import lateral_camera
+
+    cam = lateral_camera(manifest)
+    for option, frames in (("--frames", args.frames), ("--refine-frames", args.refine_frames)):
+        bad = [f for f in frames or () if not 0 <= f < len(cam.frames)]
+        if bad:
+            raise InputError(manifest.path or manifest.root, f"{option} {bad[0]} is not a frame of camera "
+                             f"{cam.name!r} (0 to {len(cam.frames) - 1})", f"cameras.{cam.name}.frames")
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:

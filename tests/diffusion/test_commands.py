@@ -148,3 +148,14 @@ def test_make_pairs_rejects_bad_offsets_before_any_work(tmp_path, capsys):
         assert exc.value.code == 2
         assert f"argument {flag.split('=')[0]}" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_restore_rejects_frames_the_camera_does_not_have(synthetic_package, tmp_path, capsys):  # noqa: F811
+    root, truth = synthetic_package
+    ply = tmp_path / "recon.ply"
+    write_splats(ply, truth)
+    out = tmp_path / "o"
+    for flags in (["--frames", "6"], ["--evaluate", "--refine", "--refine-frames", "0,-1"]):
+        assert main(["restore", str(root), "--gaussians", str(ply), "--out", str(out), *flags]) == 2
+        assert f"{flags[-2]} {flags[-1].split(',')[-1]} is not a frame of camera 'front'" in capsys.readouterr().err
+    assert not out.exists()
