@@ -251,8 +251,8 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
     from .restore import lateral_camera, restore_lateral_views
 
     cam = lateral_camera(manifest)
-    frames = args.frames if args.frames is not None else list(range(len(cam.frames)))
-    views = restore_lateral_views(manifest, gaussians, restorer, frames, args.offsets, args.step, sampler=sampler)
+    views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
+                                  sampler=sampler)
     index = []
     for v in views:
         rel = f"{v.offset_m:+.2f}/{v.frame:06d}.png"
@@ -277,15 +277,12 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
     if args.refine:
         from .refine import RefineConfig, refine_gaussians
-        from .restore import lateral_camera, restore_lateral_views
+        from .restore import restore_lateral_views
 
         # As the pipeline does: the lateral views of every recorded frame (not only the scored
         # ones) at --offsets, restored by the chain with --step; scored chains are reused.
-        frames = args.refine_frames
-        if frames is None:
-            frames = list(range(len(lateral_camera(manifest).frames)))
         t0 = time.perf_counter()
-        views = restore_lateral_views(manifest, gaussians, restorer, frames, args.offsets, args.step,
+        views = restore_lateral_views(manifest, gaussians, restorer, args.refine_frames, args.offsets, args.step,
                                       sampler=sampler, chains=result.chains)
         restore_seconds = round(time.perf_counter() - t0, 1)
         cfg = RefineConfig(iters=args.refine_iters)
@@ -294,7 +291,7 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
         # The control: the same refinement on the recorded views alone, so the table shows what
         # the restored views add beyond training the reconstruction longer.
         control, control_stats = refine_gaussians(manifest, gaussians, [], cfg)
-        metrics["refine"] = {**stats, "step_m": args.step, "frames": frames, "offsets_m": list(args.offsets),
+        metrics["refine"] = {**stats, "step_m": args.step, "frames": sorted({v.frame for v in views}), "offsets_m": list(args.offsets),
                              "restore_seconds": restore_seconds, "control_seconds": control_stats["seconds"]}
         metrics["lateral"] += score_gaussians(manifest, refined, "refined", args.frames)
         metrics["lateral"] += score_gaussians(manifest, control, "refined_recorded_only", args.frames)

@@ -134,6 +134,13 @@ class RestoredView:
     height: int
     image: np.ndarray
 
+    @classmethod
+    def shifted(cls, cam, frame: int, offset_m: float, image: np.ndarray) -> RestoredView:
+        """``image`` as the view of ``cam``'s recorded frame ``frame`` moved ``offset_m`` to the right."""
+        cf = cam.frames[frame]
+        c2w = conventions.lateral_shift(cf.camera_to_world, offset_m)
+        return cls(frame, offset_m, cf.K, c2w, conventions.invert_rigid(c2w), cam.width, cam.height, image)
+
 
 @dataclass
 class LateralRestoration:
@@ -151,7 +158,7 @@ def restore_lateral_views(
     manifest: Manifest,
     gaussians: Gaussians,
     restorer,
-    frames: list[int],
+    frames: list[int] | None,
     offsets: list[float],
     step: float,
     *,
@@ -159,12 +166,13 @@ def restore_lateral_views(
     chains: dict[int, LateralChain] | None = None,
     progress: bool = True,
 ) -> list[RestoredView]:
-    """The views at ``+-offsets`` of each recorded frame in ``frames`` (the lateral camera), restored
-    by the chain with step ``step``; ``chains`` (by frame) are reused, so views already restored
-    while scoring are not sampled again. Refinement trains on these."""
+    """The views at ``+-offsets`` of each recorded frame in ``frames`` (default: all) of the lateral
+    camera, restored by the chain with step ``step``; ``chains`` (by frame) are reused, so views
+    already restored while scoring are not sampled again. Refinement trains on these."""
     from tqdm import tqdm
 
     cam = lateral_camera(manifest)
+    frames = range(len(cam.frames)) if frames is None else frames
     render = SplatRenderer(gaussians)
     chains = {} if chains is None else chains
     signed = sorted({s * abs(o) for o in offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
@@ -172,13 +180,7 @@ def restore_lateral_views(
     for fi in tqdm(frames, desc="restore", unit="frame", disable=not progress):
         if fi not in chains:
             chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
-        cf = cam.frames[fi]
-        for off in signed:
-            c2w = conventions.lateral_shift(cf.camera_to_world, off)
-            views.append(
-                RestoredView(fi, off, cf.K, c2w, conventions.invert_rigid(c2w), cam.width, cam.height,
-                             chains[fi].restore(off, step))
-            )
+        views += [RestoredView.shifted(cam, fi, off, chains[fi].restore(off, step)) for off in signed]
     return views
 
 

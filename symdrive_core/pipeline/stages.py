@@ -88,7 +88,6 @@ def restore_stage(ctx) -> dict:
     with lateral ground truth, also score raw 3DGS and the ablations on those views."""
     from tqdm import tqdm
 
-    from .. import conventions
     from ..diffusion.data import SplatRenderer
     from ..diffusion.restore import (
         LateralChain,
@@ -124,7 +123,6 @@ def restore_stage(ctx) -> dict:
             for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
         path = output_path(ctx.out, "restore", f"{cam.name}/{off:+g}", fi)
-        cf = cam.frames[fi]
         if path.exists():
             image = read_image(path, channels=3)
         else:
@@ -132,9 +130,7 @@ def restore_stage(ctx) -> dict:
                 chains[cam.name, fi] = LateralChain.for_frame(m, cam, fi, model, render, sampler)
             image = chains[cam.name, fi].restore(off, opts.ar_step)
             write_image(path, image)
-        c2w = conventions.lateral_shift(cf.camera_to_world, off)
-        ctx.shared.restored.append(RestoredView(fi, off, cf.K, c2w, conventions.invert_rigid(c2w), cam.width,
-                                                cam.height, image))
+        ctx.shared.restored.append(RestoredView.shifted(cam, fi, off, image))
     return {"views_restored": len(ctx.shared.restored)}
 
 
