@@ -47,3 +47,48 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
     assert control_stats["restored_views"] == 0
     control_psnr = np.mean([r["psnr"] for r in score_gaussians(manifest, control, "control")])
     assert control_psnr < after
+
+
+def _depth_error(manifest, gaussians) -> float:
+    """Mean |1/rendered - 1/true| depth over the recorded views' surface pixels."""
+    import torch
+
+    from symdrive_core.optim.reconstruct import depth_loss, load_views, params_from_gaussians, render
+
+    params = params_from_gaussians(gaussians, gaussians.sh_degree)
+    with torch.no_grad():
+        errors = []
+        for v in load_views(manifest, manifest.ground_truth["train_frames"]):
+            _, alpha, info = render(
+                params, v.K, v.viewmat, v.width, v.height, gaussians.sh_degree, render_depth=True
+            )
+            errors.append(float(depth_loss(info, alpha, v.depth)))
+    return float(np.mean(errors))
+
+
+def test_depth_supervision_removes_floaters_that_colour_alone_keeps(synthetic_package):  # noqa: F811
+    """Fainter copies of wall Gaussians halfway to the camera, shrunk to cover the same pixels in
+    the same colour, put the surface in the wrong place while the recorded images hardly change.
+    Colour alone cuts the depth error to about a third; the recorded views' depth halves what is
+    left (measured over seeds 0-2: 0.032 -> 0.010 -> 0.0056)."""
+    root, truth = synthetic_package
+    manifest = load_manifest(root)
+    wall = np.flatnonzero(truth.means[:, 1] > 5.5)[::3]
+    cam = np.array([truth.means[wall, 0], np.zeros(len(wall)), np.full(len(wall), 1.5)]).T
+    floaters = cam + 0.5 * (truth.means[wall] - cam)
+    damaged = Gaussians(
+        np.concatenate([truth.means, floaters]).astype(np.float32),
+        np.concatenate([truth.quats, truth.quats[wall]]),
+        np.concatenate([truth.log_scales, truth.log_scales[wall] + np.log(0.5)]).astype(np.float32),
+        np.concatenate([truth.opacity_logits, truth.opacity_logits[wall] - 2.0]).astype(np.float32),
+        np.concatenate([truth.sh, truth.sh[wall]]),
+    )
+    without, _ = refine_gaussians(
+        manifest, damaged, [], RefineConfig(iters=60, depth_weight=0.0), progress=False
+    )
+    with_depth, _ = refine_gaussians(
+        manifest, damaged, [], RefineConfig(iters=60, depth_weight=5.0), progress=False
+    )
+    before, colour_only, depth_too = (_depth_error(manifest, g) for g in (damaged, without, with_depth))
+    assert colour_only < 0.5 * before
+    assert depth_too < 0.7 * colour_only
