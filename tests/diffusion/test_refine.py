@@ -50,15 +50,16 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
 
 
 def _depth_error(manifest, gaussians) -> float:
-    """Mean |1/rendered - 1/true| depth over the recorded views' surface pixels."""
+    """Mean |1/rendered - 1/true| depth over the surface pixels of the views refinement trains on."""
     import torch
 
     from symdrive_core.optim.reconstruct import depth_loss, load_views, params_from_gaussians, render
+    from symdrive_core.world.package import split_frames
 
     params = params_from_gaussians(gaussians, gaussians.sh_degree)
     with torch.no_grad():
         errors = []
-        for v in load_views(manifest, manifest.ground_truth["train_frames"]):
+        for v in load_views(manifest, split_frames(manifest)[0]):
             _, alpha, info = render(
                 params, v.K, v.viewmat, v.width, v.height, gaussians.sh_degree, render_depth=True
             )
