@@ -7,6 +7,7 @@ writes the report: the same files and the same report as a local run.
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from .plan import PlanOptions
@@ -19,47 +20,54 @@ def scene_out_dir(out_root: Path, package: str | Path) -> Path:
     return Path(out_root) / name
 
 
-def _render_chunk(package: str, out: str, camera: str, frames: list[int], device: str) -> int:
+def _render_chunk(package: str, out: str, camera: str, frames: list[int], device: str,
+                  allow_external: bool) -> int:
     """Render some frames of one scene into its output directory (a Ray task)."""
     from ..scene import load_manifest
     from .plan import make_plan
     from .run import render_frames
 
-    manifest = load_manifest(package)
+    manifest = load_manifest(package, allow_external=allow_external)
     plan = make_plan(manifest)
     return render_frames(manifest, plan, Path(out), [(camera, f) for f in frames], device, progress=False)
 
 
 def run_batch(packages: list[str], out_root: str | Path, *, executor: str = "local", ray_address: str | None = None,
               frames_per_task: int = 4, options: PlanOptions | None = None, device: str = "cpu",
-              progress: bool = True) -> list[dict]:
+              progress: bool = True, force: bool = False, allow_external: bool = False) -> list[dict]:
     out_root = Path(out_root)
     outs = [scene_out_dir(out_root, p) for p in packages]
     if len(set(outs)) != len(outs):
         raise ValueError("two packages share a directory name; give them distinct names")
+    run = dict(options=options, device=device, force=force, allow_external=allow_external)
     if executor == "local":
-        return [run_scene(p, o, options=options, device=device, progress=progress) for p, o in zip(packages, outs)]
+        return [run_scene(p, o, progress=progress, **run) for p, o in zip(packages, outs)]
     if executor != "ray":
         raise ValueError(f"executor: expected 'local' or 'ray', got {executor!r}")
     import ray
 
-    from ..scene import load_manifest
-    from .plan import make_plan
-    from .state import RunState
+    from ..scene import check_files, load_manifest
+    from .lock import OutputLock
+    from .outputs import OutputTree
+    from .run import open_output
+    from .stages import StageOptions
 
     if not ray.is_initialized():
         ray.init(address=ray_address, include_dashboard=False, log_to_driver=False)
     render_task = ray.remote(_render_chunk)
     finish_task = ray.remote(run_scene)
-    chunks = []
-    for package, out in zip(packages, outs):
-        manifest = load_manifest(package)
-        plan = make_plan(manifest, options)
-        RunState.open(out, plan.inputs_hash, ["render", "masks"])  # start clean if inputs changed
-        for cam in manifest.cameras:
-            frames = list(range(len(cam.frames)))
-            for i in range(0, len(frames), frames_per_task):
-                chunks.append(render_task.remote(str(package), str(out), cam.name, frames[i:i + frames_per_task], device))
-    ray.get(chunks)
-    return ray.get([finish_task.remote(str(p), str(o), options=options, device=device, progress=False)
-                    for p, o in zip(packages, outs)])
+    with contextlib.ExitStack() as held:  # this driver holds every scene's folder until its report
+        chunks = []
+        for package, out in zip(packages, outs):
+            held.enter_context(OutputLock(out))
+            manifest = load_manifest(package, allow_external=allow_external)
+            check_files(manifest)
+            open_output(manifest, OutputTree(out), options or PlanOptions(), StageOptions(), device, force)
+            for cam in manifest.cameras:
+                frames = list(range(len(cam.frames)))
+                for i in range(0, len(frames), frames_per_task):
+                    chunks.append(render_task.remote(str(package), str(out), cam.name, frames[i:i + frames_per_task],
+                                                     device, allow_external))
+        ray.get(chunks)
+        return ray.get([finish_task.remote(str(p), str(o), progress=False, lock=False, **run)
+                        for p, o in zip(packages, outs)])

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .lock import OutputLock
+from .outputs import OutputTree
 from .plan import PlanOptions
 from .stages import StageOptions
 
@@ -124,6 +126,12 @@ def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progres
 
 def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dict:
     """Run the demo; returns the report (also written to ``out/report.json`` and ``report.md``)."""
+    tree = OutputTree(out)
+    with OutputLock(tree.root):  # the figures and report.md too are this run's
+        return _run_demo(tree, QUICK if quick else FULL, quick, progress)
+
+
+def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool) -> dict:
     import time
 
     from ..diffusion.data import SplatRenderer
@@ -135,22 +143,22 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dic
     from ..scene import load_manifest
     from ..splat.tensors import GaussianTensors
     from ..world.package import lateral_views
-    from .run import output_path, run_scene
+    from .report import write_report_json
+    from .run import run_scene
 
-    out = Path(out)
-    opts = QUICK if quick else FULL
+    out = tree.root
     t0 = time.perf_counter()
     report = run_scene(DEMO_PACKAGE, out, options=PlanOptions(refine=not quick), stage_options=opts,
-                       progress=progress)
+                       progress=progress, lock=False)
     manifest = load_manifest(DEMO_PACKAGE)
     background = read_splats(manifest.resolve(manifest.background_splats))
-    figures = out / "figures"
+    figures = tree.folder("figures")
     fi = opts.frames[0]
 
     lateral = [v for v in lateral_views(manifest) if v.frame == fi and abs(v.offset_m) == 3.0 and v.offset_m > 0]
     if lateral:
         v = lateral[0]
-        restored = output_path(out, "restore", f"{manifest.cameras[0].name}/{v.offset_m:+g}", fi)
+        restored = tree.frame("restore", f"{manifest.cameras[0].name}/{v.offset_m:+g}", fi)
         panels = [("recorded view (0 m)", read_image(manifest.resolve(manifest.cameras[0].frames[fi].image), channels=3)),
                   ("raw 3DGS at +3 m", SplatRenderer(background)(v.K, v.world_to_camera, v.width, v.height)),
                   ("restored at +3 m", read_image(restored, channels=3)),
@@ -169,7 +177,7 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dic
         bg_t = GaussianTensors.from_gaussians(background)
         asset = load_vehicle_asset(manifest.resolve(p.asset))
         panels = [("naive insertion", render_insertion(p.camera, bg_t, asset.gaussians, p.pose)[0])]
-        harmonized = output_path(out, "harmonize", p.camera_name, p.frame)
+        harmonized = tree.frame("harmonize", p.camera_name, p.frame)
         if harmonized.exists():
             panels.append(("harmonized (RePaint)", read_image(harmonized, channels=3)))
         tuned_asset = read_splats(finetuned[0])
@@ -177,15 +185,13 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dic
         panels += [("fine-tuned asset" + (" + shadow" if tuned.shadow is not None else ""), tuned.image),
                    ("Cycles, car truly in scene", read_image(manifest.resolve(p.with_image), channels=3))]
         _montage(figures / "insertion.png", panels)
-        paths = render_trajectory(manifest, bg_t, tuned_asset, p.wlh, out / "trajectory", progress)
+        paths = render_trajectory(manifest, bg_t, tuned_asset, p.wlh, tree.folder("trajectory"), progress)
         picks = paths[:: max(1, len(paths) // 4)][:4]
         _montage(figures / "trajectory.png", [(f"frame {int(q.stem)}", read_image(q, channels=3)) for q in picks])
     report["demo_seconds"] = round(time.perf_counter() - t0, 1)
     report["demo_mode"] = "quick" if quick else "full"
-    from .report import write_report_json
-
     write_report_json(out, report)
-    write_text_atomic(out / "report.md", format_markdown(report, figures))
+    write_text_atomic(tree.path("report.md"), format_markdown(report, figures))
     return report
 
 

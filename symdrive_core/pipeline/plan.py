@@ -14,8 +14,6 @@ never loads a diffusion model for a scene that needs none.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -23,6 +21,7 @@ import numpy as np
 
 from ..io.ply import read_header, read_splats
 from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
+from .cache_key import inputs_key
 
 STAGES = ("reconstruct", "render", "cast_shadow", "restore", "refine", "harmonize", "finetune",
           "sh_eval", "evaluate")
@@ -95,15 +94,6 @@ def actor_local_box(manifest: Manifest, actor) -> tuple[np.ndarray, np.ndarray]:
     return (g.means - pad).min(axis=0), (g.means + pad).max(axis=0)
 
 
-def inputs_hash(manifest: Manifest) -> str:
-    """Fingerprint of the manifest and the size/mtime of every file it names."""
-    h = hashlib.sha256(json.dumps(manifest.to_json(), sort_keys=True).encode())
-    for p in sorted(str(p) for p in manifest.root.rglob("*") if p.is_file() and "output" not in p.parts):
-        st = Path(p).stat()
-        h.update(f"{p}:{st.st_size}:{st.st_mtime_ns}".encode())
-    return h.hexdigest()[:16]
-
-
 def _visibility(manifest: Manifest, near: float):
     visible: dict[str, dict[int, list[str]]] = {}
     culled: dict[str, dict[int, list[str]]] = {}
@@ -147,8 +137,10 @@ def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
                          f"{eff.shade:.2f} of the light)", frames, seen)
 
 
-def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None) -> Plan:
-    """Decide every stage for this scene. ``previous`` is the last run's state (for caching)."""
+def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None,
+              key: str | None = None) -> Plan:
+    """Decide every stage for this scene. ``previous`` is the last run's state and ``key`` this
+    run's cache key (see cache_key.inputs_key; by default, that of these options alone)."""
     opt = options or PlanOptions()
     eff = manifest.effects
     visible, culled = _visibility(manifest, opt.near)
@@ -214,7 +206,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
                                 else ("evaluation disabled" if has_gt else "no ground truth")))
 
     plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,
-                visible, culled, degrees, inputs_hash(manifest))
+                visible, culled, degrees, key or inputs_key(manifest, opt))
     if previous and previous.get("inputs_hash") == plan.inputs_hash:
         # A stage is reused only if every running stage after it is too: later stages take
         # what earlier ones hand over in memory, so the first stage to redo redoes the rest.

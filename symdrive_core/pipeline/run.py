@@ -8,6 +8,7 @@ only complete files, and a re-run skips the frames whose outputs exist.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,13 +18,13 @@ from tqdm import tqdm
 from ..io.images import write_image, write_mask
 from ..scene import Manifest, check_files, load_manifest
 from . import stages
+from .cache_key import inputs_key
+from .lock import OutputLock
+from .outputs import OutputTree
 from .plan import APPLIED_INSIDE, Plan, PlanOptions, make_plan
 from .report import Report
 from .stages import Shared, StageOptions
 from .state import RunState
-
-STAGE_DIRS = ["reconstruction", "render", "masks", "shadows", "restore", "refine", "harmonize", "finetune",
-              "insertion_assets"]
 
 
 @dataclass
@@ -31,6 +32,7 @@ class RunContext:
     manifest: Manifest
     plan: Plan
     out: Path
+    tree: OutputTree
     state: RunState
     report: Report
     device: str
@@ -38,20 +40,20 @@ class RunContext:
     options: StageOptions
     shared: Shared
 
-    def frame_path(self, kind: str, camera: str, frame: int, suffix: str = ".png", actor: str | None = None) -> Path:
-        return output_path(self.out, kind, camera, frame, suffix, actor)
+
+def output_path(out: Path | OutputTree, kind: str, camera: str, frame: int, suffix: str = ".png",
+                actor: str | None = None) -> Path:
+    """The path of one per-frame output, inside ``out`` (see OutputTree.frame)."""
+    tree = out if isinstance(out, OutputTree) else OutputTree(out)
+    return tree.frame(kind, camera, frame, suffix, actor)
 
 
-def output_path(out: Path, kind: str, camera: str, frame: int, suffix: str = ".png", actor: str | None = None) -> Path:
-    parts = [kind, camera] + ([actor] if actor else [])
-    return Path(out).joinpath(*parts, f"{frame:06d}{suffix}")
-
-
-def render_frames(manifest: Manifest, plan: Plan, out: Path, jobs: list[tuple[str, int]], device: str,
+def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: list[tuple[str, int]], device: str,
                   progress: bool = True) -> int:
     """Render (camera, frame) jobs whose outputs are missing; returns how many were rendered."""
     from .scene_render import SceneRenderer
 
+    out = out if isinstance(out, OutputTree) else OutputTree(out)
     renderer = None
     done = 0
     casting = plan.stage("cast_shadow")
@@ -78,7 +80,7 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path, jobs: list[tuple[st
 
 def _render_stage(ctx: RunContext) -> dict:
     jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in range(len(cam.frames))]
-    done = render_frames(ctx.manifest, ctx.plan, ctx.out, jobs, ctx.device, ctx.progress)
+    done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress)
     return {"frames_rendered": done, "frames_reused": len(jobs) - done}
 
 
@@ -88,31 +90,44 @@ STAGE_RUNNERS = {"reconstruct": stages.reconstruct_stage, "render": _render_stag
 
 
 def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, device: str = "cpu",
-              progress: bool = True, stage_options: StageOptions | None = None) -> dict:
-    manifest = load_manifest(package)
+              progress: bool = True, stage_options: StageOptions | None = None, force: bool = False,
+              allow_external: bool = False, lock: bool = True) -> dict:
+    """Run a package's plan into ``out_dir`` (default: the manifest's ``output``, inside the
+    package). ``force`` runs beside files no run wrote there; ``lock=False`` is for a caller
+    that already holds the folder's lock (a batch driver)."""
+    manifest = load_manifest(package, allow_external=allow_external)
     check_files(manifest)
-    out = Path(out_dir) if out_dir is not None else manifest.root / manifest.output
-    out.mkdir(parents=True, exist_ok=True)
-    plan = make_plan(manifest, options, previous=RunState.load_raw(out))
-    state = RunState.open(out, plan.inputs_hash, STAGE_DIRS)
-    report = Report(manifest.name, device)
-    ctx = RunContext(manifest, plan, out, state, report, device, progress, stage_options or StageOptions(), Shared())
-    for decision in plan.stages:
-        name = decision.name
-        if not decision.run:
-            report.stage(name, False, decision.reason)
-        elif name in APPLIED_INSIDE:
-            report.stage(name, True, f"{decision.reason} (applied in {APPLIED_INSIDE[name]})")
-        elif decision.cached:
-            report.metrics.update(state.metrics.get(name, {}))
-            report.stage(name, False, decision.reason, state.seconds.get(name))
-        else:
-            before = {k: repr(v) for k, v in report.metrics.items()}
-            t0 = time.perf_counter()
-            details = STAGE_RUNNERS[name](ctx) or {}
-            dt = time.perf_counter() - t0
-            added = {k: v for k, v in report.metrics.items() if before.get(k) != repr(v)}
-            state.finish(name, dt, added)
-            report.stage(name, True, decision.reason, dt, **details)
-    report.write(out)
+    options, stage_options = options or PlanOptions(), stage_options or StageOptions()
+    tree = OutputTree(Path(out_dir) if out_dir is not None else manifest.root / manifest.output)
+    with OutputLock(tree.root) if lock else contextlib.nullcontext():
+        state, plan = open_output(manifest, tree, options, stage_options, device, force)
+        report = Report(manifest.name, device)
+        ctx = RunContext(manifest, plan, tree.root, tree, state, report, device, progress, stage_options, Shared())
+        for decision in plan.stages:
+            name = decision.name
+            if not decision.run:
+                report.stage(name, False, decision.reason)
+            elif name in APPLIED_INSIDE:
+                report.stage(name, True, f"{decision.reason} (applied in {APPLIED_INSIDE[name]})")
+            elif decision.cached:
+                report.metrics.update(state.metrics.get(name, {}))
+                report.stage(name, False, decision.reason, state.seconds.get(name))
+            else:
+                before = {k: repr(v) for k, v in report.metrics.items()}
+                t0 = time.perf_counter()
+                details = STAGE_RUNNERS[name](ctx) or {}
+                dt = time.perf_counter() - t0
+                added = {k: v for k, v in report.metrics.items() if before.get(k) != repr(v)}
+                state.finish(name, dt, added)
+                report.stage(name, True, decision.reason, dt, **details)
+        report.write(tree.root)
     return report.to_json()
+
+
+def open_output(manifest: Manifest, tree: OutputTree, options: PlanOptions, stage_options: StageOptions,
+                device: str, force: bool = False) -> tuple[RunState, Plan]:
+    """The plan under this run's cache key, and the folder's state: resumed under the same key,
+    else cleared of what earlier runs wrote (the caller holds the lock)."""
+    key = inputs_key(manifest, options, stage_options, device)
+    plan = make_plan(manifest, options, previous=RunState.load_raw(tree.root), key=key)
+    return RunState.open(tree, key, force), plan

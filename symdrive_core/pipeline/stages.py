@@ -77,7 +77,7 @@ def reconstruct_stage(ctx) -> dict:
     """Fit background Gaussians to the package's images (it had none)."""
     from ..optim.reconstruct import reconstruct
 
-    out = ctx.out / "reconstruction"
+    out = ctx.tree.folder("reconstruction")
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
     ctx.manifest.background_splats = str((out / "background.ply").resolve())
     return {k: v for k, v in vars(result).items() if isinstance(v, (int, float))}
@@ -98,7 +98,6 @@ def restore_stage(ctx) -> dict:
     )
     from ..io.images import read_image, write_image
     from ..world.package import with_lateral_offsets
-    from .run import output_path
 
     m, opts = ctx.manifest, ctx.options
     g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
@@ -116,13 +115,13 @@ def restore_stage(ctx) -> dict:
         cam_name = lateral_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
         for v in ctx.shared.restored:
-            write_image(output_path(ctx.out, "restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
+            write_image(ctx.tree.frame("restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
             done.add((cam_name, v.frame, round(v.offset_m, 6)))
     render = SplatRenderer(g)
     jobs = [(cam, fi, off) for cam in m.cameras for fi in (opts.frames or range(len(cam.frames)))
             for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
-        path = output_path(ctx.out, "restore", f"{cam.name}/{off:+g}", fi)
+        path = ctx.tree.frame("restore", f"{cam.name}/{off:+g}", fi)
         if path.exists():
             image = read_image(path, channels=3)
         else:
@@ -143,7 +142,7 @@ def refine_stage(ctx) -> dict:
     refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
                                       RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
                                       progress=ctx.progress)
-    write_splats(ctx.out / "refine" / "background.ply", refined)
+    write_splats(ctx.tree.path("refine", "background.ply"), refined)
     if ctx.plan.runs("evaluate") and _has_lateral_truth(ctx.manifest):
         ctx.report.metrics.setdefault("lateral", []).extend(
             r for r in score_gaussians(ctx.manifest, refined, "refined", ctx.options.frames)
@@ -155,12 +154,11 @@ def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
     """Vehicle pixels (from the render's instance masks) ∪ each vehicle's shadow region."""
     from ..insertion.shadow import harmonization_region, shadow_region
     from ..io.images import read_mask
-    from .run import output_path
 
     m = ctx.manifest
     region = None
     for aid in ctx.plan.stage("harmonize").actors:
-        mpath = output_path(ctx.out, "masks", cam.name, fi, actor=aid)
+        mpath = ctx.tree.frame("masks", cam.name, fi, actor=aid)
         if aid not in ctx.plan.visible[cam.name][fi] or not mpath.exists():
             continue
         actor = m.actor(aid)
@@ -187,18 +185,17 @@ def harmonize_stage(ctx) -> dict:
     from tqdm import tqdm
 
     from ..io.images import read_image, write_image, write_mask
-    from .run import output_path
 
     harmonizer = _harmonizer(ctx)
     jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("harmonize").frames]
     n = 0
     for cam, fi in tqdm(jobs, desc="harmonize", unit="frame", disable=not ctx.progress):
-        path = output_path(ctx.out, "harmonize", cam.name, fi)
+        path = ctx.tree.frame("harmonize", cam.name, fi)
         region = _inserted_region(ctx, cam, fi)
         if path.exists() or region is None or not region.any():
             continue
-        image = read_image(output_path(ctx.out, "render", cam.name, fi), channels=3)
-        write_mask(output_path(ctx.out, "harmonize", cam.name, fi, ".region.png"), region.astype(np.float32))
+        image = read_image(ctx.tree.frame("render", cam.name, fi), channels=3)
+        write_mask(ctx.tree.frame("harmonize", cam.name, fi, ".region.png"), region.astype(np.float32))
         write_image(path, harmonizer(image, region))
         n += 1
     return {"frames_harmonized": n}
@@ -212,13 +209,12 @@ def finetune_stage(ctx) -> dict:
     from ..io.ply import read_splats, write_splats
     from ..optim.finetune import FinetuneConfig, finetune_colors
     from ..splat.tensors import GaussianTensors
-    from .run import output_path
 
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))
     bg = GaussianTensors.from_gaussians(background(ctx))
     written = []
     for aid in ctx.plan.stage("finetune").actors:
-        out = ctx.out / "finetune" / f"{aid}.ply"
+        out = ctx.tree.path("finetune", f"{aid}.ply")
         if out.exists():
             written.append(aid)
             continue
@@ -227,7 +223,7 @@ def finetune_stage(ctx) -> dict:
         samples = []
         for cam in ctx.manifest.cameras:
             for fi in ctx.plan.stage("harmonize").frames:
-                target_path = output_path(ctx.out, "harmonize", cam.name, fi)
+                target_path = ctx.tree.frame("harmonize", cam.name, fi)
                 if aid not in ctx.plan.visible[cam.name][fi] or not target_path.exists():
                     continue
                 frame = insert_frame(ctx.manifest, bg, vehicle, actor.pose(fi), actor.wlh,
@@ -254,7 +250,7 @@ def evaluate_stage(ctx) -> dict:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = InsertionConfig(train_views=opts.insertion_train_views,
                               finetune=FinetuneConfig(steps=opts.finetune_steps, seed=opts.seed),
-                              assets_out=ctx.out / "insertion_assets")
+                              assets_out=ctx.tree.folder("insertion_assets"))
         ctx.report.metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
                                                              details=details, progress=ctx.progress)
         ctx.report.extra.setdefault("timings", {}).update(details.get("timings", {}))

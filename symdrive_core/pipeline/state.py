@@ -1,17 +1,19 @@
 """Persistent run state (``state.json``), so a killed run resumes without redoing work.
 
 Each output file is written atomically, so a file that exists is complete; the state records
-the inputs' fingerprint (a changed input invalidates everything) and which stages finished.
+the run's cache key (see cache_key: a changed input, option or code invalidates everything) and
+which stages finished. What is deleted when the key changes is exactly what runs in this folder
+wrote (the journal of :class:`~.outputs.OutputTree`), never a file of someone else's.
 """
 
 from __future__ import annotations
 
 import json
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
+from .outputs import REPORT, STATE, OutputError, OutputTree
 
 
 @dataclass
@@ -24,24 +26,31 @@ class RunState:
 
     @staticmethod
     def load_raw(out_dir: Path) -> dict | None:
-        p = Path(out_dir) / "state.json"
+        p = Path(out_dir) / STATE
         try:
-            return json.loads(p.read_text())
-        except (OSError, json.JSONDecodeError):
+            raw = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
             return None
+        return raw if isinstance(raw, dict) else None
 
     @classmethod
-    def open(cls, out_dir: Path, inputs_hash: str, stage_dirs: list[str]) -> RunState:
-        """Resume the state in ``out_dir``; stale outputs from other inputs are removed."""
-        out_dir = Path(out_dir)
-        _remove_partial_files(out_dir)
-        raw = cls.load_raw(out_dir)
+    def open(cls, tree: OutputTree, inputs_hash: str, force: bool = False) -> RunState:
+        """Resume the state in the tree's folder (the caller holds its lock). Under another key,
+        what earlier runs wrote there is removed first. A folder holding files no run wrote is
+        refused unless ``force`` (they are left alone either way)."""
+        foreign = tree.foreign_files()
+        if foreign and not force:
+            raise OutputError(f"{tree.root}: holds {len(foreign)} file(s) that no symdrive run wrote here "
+                              f"(first: {foreign[0]}); choose a new or empty --out, or pass --force to run "
+                              f"beside them (they are never deleted)")
+        raw = cls.load_raw(tree.root)
         if raw is not None and raw.get("inputs_hash") == inputs_hash:
-            return cls(out_dir / "state.json", inputs_hash, list(raw.get("completed", [])),
+            tree.remove_temporaries()
+            return cls(tree.root / STATE, inputs_hash, list(raw.get("completed", [])),
                        dict(raw.get("seconds", {})), dict(raw.get("metrics", {})))
-        for d in stage_dirs:
-            shutil.rmtree(out_dir / d, ignore_errors=True)
-        state = cls(out_dir / "state.json", inputs_hash)
+        tree.remove_written()
+        (tree.root / REPORT).unlink(missing_ok=True)  # the report of other inputs
+        state = cls(tree.root / STATE, inputs_hash)
         state.save()
         return state
 
@@ -55,12 +64,3 @@ class RunState:
     def save(self) -> None:
         write_text_atomic(self.path, json.dumps({"inputs_hash": self.inputs_hash, "completed": self.completed,
                                                  "seconds": self.seconds, "metrics": self.metrics}, indent=1) + "\n")
-
-
-def _remove_partial_files(out_dir: Path) -> None:
-    """Temporaries a killed run left behind (``.<name>.<random>.part<ext>``, see io.atomic)."""
-    for p in sorted(out_dir.rglob(".*.part*"), reverse=True):
-        if p.is_dir():
-            shutil.rmtree(p, ignore_errors=True)
-        else:
-            p.unlink(missing_ok=True)

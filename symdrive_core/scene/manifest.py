@@ -142,6 +142,22 @@ class Manifest:
     def inserted_actors(self) -> list[Actor]:
         return [a for a in self.actors if a.kind == "inserted"]
 
+    def file_refs(self) -> list[tuple[str, str]]:
+        """Every file the manifest names, as (field, path as written)."""
+        refs: list[tuple[str, str | None]] = [("background.splats", self.background_splats),
+                                              ("background.points", self.background_points)]
+        for ci, c in enumerate(self.cameras):
+            for fi, cf in enumerate(c.frames):
+                refs += [(f"cameras[{ci}].frames[{fi}].image", cf.image),
+                         (f"cameras[{ci}].frames[{fi}].depth", cf.depth)]
+        for ai, a in enumerate(self.actors):
+            refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh)]
+        for mi, e in enumerate(self.masks):
+            refs += [(f"masks.entries[{mi}].amodal", e.amodal), (f"masks.entries[{mi}].visible", e.visible)]
+        for mi, e in enumerate(self.id_maps):
+            refs.append((f"masks.id_maps[{mi}].path", e.path))
+        return [(where, rel) for where, rel in refs if rel is not None]
+
     def to_json(self) -> dict:
         def camera_frame(cf: CameraFrame) -> dict:
             d = {"K": cf.K.tolist(), "camera_to_world": cf.camera_to_world.tolist(),
@@ -437,7 +453,7 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
         root=path.parent, path=path)
 
 
-def load_manifest(path: str | os.PathLike) -> Manifest:
+def load_manifest(path: str | os.PathLike, *, allow_external: bool = False) -> Manifest:
     """Load and validate ``manifest.json`` (or a package directory containing one)."""
     path = Path(path)
     if path.is_dir():
@@ -455,18 +471,6 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
 
 def check_files(m: Manifest) -> None:
     """Every file the manifest names exists (``symdrive validate`` runs this too)."""
-    refs: list[tuple[str, str | None]] = [("background.splats", m.background_splats),
-                                          ("background.points", m.background_points)]
-    for ci, c in enumerate(m.cameras):
-        for fi, cf in enumerate(c.frames):
-            refs += [(f"cameras[{ci}].frames[{fi}].image", cf.image),
-                     (f"cameras[{ci}].frames[{fi}].depth", cf.depth)]
-    for ai, a in enumerate(m.actors):
-        refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh)]
-    for mi, e in enumerate(m.masks):
-        refs += [(f"masks.entries[{mi}].amodal", e.amodal), (f"masks.entries[{mi}].visible", e.visible)]
-    for mi, e in enumerate(m.id_maps):
-        refs.append((f"masks.id_maps[{mi}].path", e.path))
-    for where, rel in refs:
-        if rel is not None and not (m.root / rel).exists():
+    for where, rel in m.file_refs():
+        if not (m.root / rel).exists():
             raise ManifestError(m.path or m.root, f"file not found: {rel}", where)

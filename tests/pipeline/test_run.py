@@ -131,15 +131,15 @@ def test_sunny_scene_casts_inserted_vehicles_shadows_into_the_render(make_packag
         write_splats(path.parent / "car_0.ply", synthetic.car(800))
         return path
 
-    dark = run_scene(street("dark", None), tmp_path / "dark", progress=False)
+    dark = run_scene(street("dark", None), tmp_path / "out_dark", progress=False)
     assert not next(s for s in dark["stages"] if s["name"] == "cast_shadow")["ran"]
-    assert not (tmp_path / "dark" / "shadows").exists()
-    run_scene(street("sunny", [0.3, 0.4, -1.0]), tmp_path / "sunny", progress=False)
+    assert not (tmp_path / "out_dark" / "shadows").exists()
+    run_scene(street("sunny", [0.3, 0.4, -1.0]), tmp_path / "out_sunny", progress=False)
     for i in range(2):
-        shade = read_mask(tmp_path / f"sunny/shadows/front/{i:06d}.png")
-        car = read_mask(tmp_path / f"sunny/masks/front/car_0/{i:06d}.png")
-        lit = read_image(tmp_path / f"dark/render/front/{i:06d}.png", channels=3)
-        shaded = read_image(tmp_path / f"sunny/render/front/{i:06d}.png", channels=3)
+        shade = read_mask(tmp_path / f"out_sunny/shadows/front/{i:06d}.png")
+        car = read_mask(tmp_path / f"out_sunny/masks/front/car_0/{i:06d}.png")
+        lit = read_image(tmp_path / f"out_dark/render/front/{i:06d}.png", channels=3)
+        shaded = read_image(tmp_path / f"out_sunny/render/front/{i:06d}.png", channels=3)
         assert np.array_equal(shaded[shade == 0], lit[shade == 0])  # outside the shadow: the very same pixels
         ground = (shade > 0.5) & (car < 0.01) & (lit.sum(-1) > 0.05)
         assert ground.sum() > 5
