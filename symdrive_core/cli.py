@@ -48,6 +48,13 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def add_external_assets_option(p: argparse.ArgumentParser) -> None:
+    """``--allow-external-assets`` for every command that reads a scene package."""
+    p.add_argument("--allow-external-assets", action="store_true",
+                   help="read asset files outside the package (absolute paths, '..', links leading out), as "
+                        "an add-on export without --copy-assets needs; only for packages you trust")
+
+
 def print_json(obj) -> None:
     print(json.dumps(obj, indent=1))
 

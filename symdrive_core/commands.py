@@ -4,9 +4,12 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
+    from .cli import add_external_assets_option
+
     p = sub.add_parser("validate", help="check a scene package's manifest.json and the files it names")
     p.add_argument("manifest", help="manifest.json or the package directory")
     p.add_argument("--no-files", action="store_true", help="skip the check that referenced files exist")
+    add_external_assets_option(p)
     p.set_defaults(func=_validate)
 
     p = sub.add_parser("info", help="count, SH degree and bounds of a 3DGS splat PLY")
@@ -19,7 +22,7 @@ def add_commands(sub) -> None:
 def _validate(args) -> int:
     from .scene import check_files, load_manifest
 
-    m = load_manifest(args.manifest)
+    m = load_manifest(args.manifest, allow_external=args.allow_external_assets)
     if not args.no_files:
         check_files(m)
     print(f"{m.path}: valid (version 1, {len(m.frames)} frames, {len(m.cameras)} cameras, "

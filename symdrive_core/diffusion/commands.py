@@ -44,6 +44,8 @@ CYCLE_DEFAULTS = (1000, 60000)
 
 
 def add_commands(sub) -> None:
+    from ..cli import add_external_assets_option
+
     p = sub.add_parser(
         "make-pairs", help="render restorer training pairs (I_-d, I_d) -> I_0 from a reconstruction"
     )
@@ -72,6 +74,7 @@ def add_commands(sub) -> None:
         help="densification cap of each cycle reconstruction",
     )
     p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
+    add_external_assets_option(p)
     p.set_defaults(func=_make_pairs)
 
     p = sub.add_parser("train-restorer", help="train the built-in restorer on a pairs file (CPU)")
@@ -147,6 +150,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
     p.add_argument("--threads", type=int, default=1)
+    add_external_assets_option(p)
     p.set_defaults(func=_restore)
 
 
@@ -155,7 +159,7 @@ def _load_scene(args):
     from ..io.ply import read_splats
     from ..scene import load_manifest
 
-    manifest = load_manifest(args.package)
+    manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     ply = args.gaussians or manifest.resolve(manifest.background_splats)
     if ply is None:
         raise InputError(

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
+    from ..cli import add_external_assets_option
+
     p = sub.add_parser("insert", help="insert a vehicle actor into the background splats: frames, masks, regions")
     p.add_argument("package", help="scene package directory or manifest.json")
     p.add_argument("--actor", required=True, help="id of the actor to insert")
@@ -13,6 +15,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flip-forward", action="store_true", help="turn the asset half a turn (forward = -X assets)")
     p.add_argument("--from-mesh", action="store_true", help="sample the asset's mesh instead of its splat PLY")
     p.add_argument("--samples", type=int, default=12000, help="Gaussians sampled from a mesh")
+    add_external_assets_option(p)
     p.set_defaults(func=_insert)
 
     p = sub.add_parser("insert-eval", help="naive / colour transfer / harmonized / fine-tuned insertion metrics")
@@ -27,6 +30,7 @@ def add_commands(sub) -> None:
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
     p.add_argument("--assets-out", help="write the fine-tuned assets (splat PLY) here")
     p.add_argument("--json", help="write the rows and details to this JSON file")
+    add_external_assets_option(p)
     p.set_defaults(func=_insert_eval)
 
 
@@ -36,7 +40,7 @@ def _insert(args) -> int:
     from ..scene import load_manifest
     from .render_actor import insert_actor
 
-    manifest = load_manifest(args.package)
+    manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     out = Path(args.out) if args.out else manifest.root / manifest.output / "insert"
     n = insert_actor(manifest, args.actor, out, background=args.background, flip=args.flip_forward,
                      from_mesh=args.from_mesh, n_samples=args.samples)
@@ -56,7 +60,7 @@ def _insert_eval(args) -> int:
     from .evaluate import InsertionConfig, evaluate_insertion
     from .features import load_extractor
 
-    manifest = load_manifest(args.package)
+    manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     harmonizer = None
     if not args.no_harmonize:
         from ..diffusion.models import load_restorer

@@ -6,6 +6,8 @@ from pathlib import Path
 
 
 def add_commands(sub) -> None:
+    from ..cli import add_external_assets_option
+
     p = sub.add_parser("reconstruct", help="3DGS reconstruction of a scene package's background (CPU)")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
@@ -19,6 +21,7 @@ def add_commands(sub) -> None:
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats at the result")
+    add_external_assets_option(p)
     p.set_defaults(func=_reconstruct)
 
 
@@ -28,7 +31,7 @@ def _reconstruct(args) -> int:
     from ..scene import load_manifest
     from .reconstruct import ReconstructConfig, reconstruct
 
-    manifest = load_manifest(args.package)
+    manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(seed=args.seed)
     for name in ("iters", "sh_degree", "depth_weight", "max_init_points"):
         if getattr(args, name) is not None:

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
+
 
 def add_commands(sub) -> None:
+    from ..cli import add_external_assets_option
+
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
     p.add_argument("--json", action="store_true", help="print the plan as JSON")
+    add_external_assets_option(p)
     p.set_defaults(func=_plan)
 
     p = sub.add_parser("run", help="run a scene package's plan: render, restore, harmonize, ... (resumable)")
@@ -16,6 +21,8 @@ def add_commands(sub) -> None:
     p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
     p.add_argument("--no-refine", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    add_external_assets_option(p)
     p.set_defaults(func=_run)
 
     p = sub.add_parser("batch", help="run many scene packages, in-process or on a Ray cluster")
@@ -25,12 +32,15 @@ def add_commands(sub) -> None:
     p.add_argument("--address", help="Ray cluster address (default: start a local one)")
     p.add_argument("--frames-per-task", type=int, default=4)
     p.add_argument("--device", default="cpu")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    add_external_assets_option(p)
     p.set_defaults(func=_batch)
 
     p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
     p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
     p.add_argument("--quick", action="store_true", help="fewer frames and sampler steps, no refinement (minutes)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=_demo)
 
     bench = sub.add_parser("bench", help="measurements").add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -39,6 +49,7 @@ def add_commands(sub) -> None:
     p.add_argument("--package", help="scene package with ground truth (default: the built-in street world)")
     p.add_argument("--quick", action="store_true", help="fewer frames, views and placements per setting")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_external_assets_option(p)
     p.set_defaults(func=_accuracy_time)
 
 
@@ -47,7 +58,8 @@ def _plan(args) -> int:
     from ..scene import load_manifest
     from .plan import PlanOptions, format_plan, make_plan
 
-    plan = make_plan(load_manifest(args.package), PlanOptions(refine=not args.no_refine))
+    plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
+                     PlanOptions(refine=not args.no_refine))
     if args.json:
         print_json(plan.to_json())
     else:
@@ -60,7 +72,8 @@ def _run(args) -> int:
     from .run import run_scene
 
     report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
-                       device=args.device, progress=not args.quiet)
+                       device=args.device, progress=not args.quiet, force=args.force,
+                       allow_external=args.allow_external_assets)
     for s in report["stages"]:
         took = f" ({s['seconds']:.1f} s)" if "seconds" in s else ""
         print(f"{'ran ' if s['ran'] else 'skip'} {s['name']}: {s['reason']}{took}")
@@ -71,7 +84,8 @@ def _batch(args) -> int:
     from .batch import run_batch
 
     reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
-                        frames_per_task=args.frames_per_task, device=args.device)
+                        frames_per_task=args.frames_per_task, device=args.device, force=args.force,
+                        allow_external=args.allow_external_assets)
     for r in reports:
         ran = [s["name"] for s in r["stages"] if s["ran"]]
         print(f"{r['scene']}: ran {', '.join(ran)}")
@@ -84,7 +98,7 @@ def _accuracy_time(args) -> int:
     from .demo import DEMO_PACKAGE
     from .knobs import WHY_DEFAULTS, package_settings
 
-    manifest = load_manifest(args.package or DEMO_PACKAGE)
+    manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)
     settings, skipped = package_settings(manifest, quick=args.quick)
     for group, why in skipped.items():
         print(f"left out {group} knobs: {why}")
@@ -99,7 +113,7 @@ def _accuracy_time(args) -> int:
 def _demo(args) -> int:
     from .demo import run_demo
 
-    report = run_demo(args.out, quick=args.quick, progress=not args.quiet)
+    report = run_demo(args.out, quick=args.quick, progress=not args.quiet, force=args.force)
     print(f"demo finished in {report['demo_seconds']} s: {args.out}/report.md, {args.out}/report.json")
     for key, rows in report["metrics"].items():
         print(f"  {key}: {rows}")

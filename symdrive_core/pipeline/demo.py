@@ -124,14 +124,14 @@ def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progres
     return paths
 
 
-def run_demo(out: str | Path, quick: bool = False, progress: bool = True) -> dict:
+def run_demo(out: str | Path, quick: bool = False, progress: bool = True, force: bool = False) -> dict:
     """Run the demo; returns the report (also written to ``out/report.json`` and ``report.md``)."""
     tree = OutputTree(out)
     with OutputLock(tree.root):  # the figures and report.md too are this run's
-        return _run_demo(tree, QUICK if quick else FULL, quick, progress)
+        return _run_demo(tree, QUICK if quick else FULL, quick, progress, force)
 
 
-def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool) -> dict:
+def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool, force: bool) -> dict:
     import time
 
     from ..diffusion.data import SplatRenderer
@@ -149,7 +149,7 @@ def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool)
     out = tree.root
     t0 = time.perf_counter()
     report = run_scene(DEMO_PACKAGE, out, options=PlanOptions(refine=not quick), stage_options=opts,
-                       progress=progress, lock=False)
+                       progress=progress, force=force, lock=False)
     manifest = load_manifest(DEMO_PACKAGE)
     background = read_splats(manifest.resolve(manifest.background_splats))
     figures = tree.folder("figures")

@@ -1,8 +1,9 @@
 """One run per output folder: an exclusive lock held for the run's duration.
 
 The lock is an advisory ``flock`` on a file in the output folder, so the operating system
-releases it when its holder dies: a lock left by a killed run is simply taken over. The file
-names the holder (pid, host, start time) so that a refused second run can say who holds it.
+releases it when its holder dies: a lock file left by a killed run is simply taken over. The
+file names the holder (pid, host, start time) so that a refused second run can say who holds
+it, and is removed when the run ends.
 """
 
 from __future__ import annotations
@@ -35,14 +36,18 @@ class OutputLock:
 
     def __enter__(self) -> OutputLock:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            _lock(fd)
-        except OSError:
-            holder = _describe(fd)
-            os.close(fd)
-            raise OutputLocked(f"{self.path.parent}: another run is writing here ({holder}); wait for it "
-                               f"to finish or choose another --out") from None
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                _lock(fd)
+            except OSError:
+                holder = _describe(fd)
+                os.close(fd)
+                raise OutputLocked(f"{self.path.parent}: another run is writing here ({holder}); wait for it "
+                                   f"to finish or choose another --out") from None
+            if _same_file(fd, self.path):
+                break
+            os.close(fd)  # its holder removed the file as we took it: take the new one
         os.ftruncate(fd, 0)
         os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
                                  "since": time.strftime("%Y-%m-%dT%H:%M:%S")}).encode())
@@ -51,10 +56,17 @@ class OutputLock:
 
     def __exit__(self, *exc) -> None:
         if self._fd is not None:
-            os.ftruncate(self._fd, 0)
+            self.path.unlink(missing_ok=True)  # removed while held, so no lock file outlives its run
             _unlock(self._fd)
             os.close(self._fd)
             self._fd = None
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path))
+    except FileNotFoundError:
+        return False
 
 
 def _lock(fd: int) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
+    from ..cli import add_external_assets_option
+
     p = sub.add_parser("traffic", help="simulate traffic on the package's road with SUMO; write a new package "
                                        "whose actors are the vehicles")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -19,6 +21,7 @@ def add_commands(sub) -> None:
     p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
     p.add_argument("--lanes", type=int, default=2, help="lanes of a --road road (default 2)")
     p.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit for SUMO in seconds")
+    add_external_assets_option(p)
     p.set_defaults(func=_traffic)
 
 
@@ -34,7 +37,7 @@ def _traffic(args) -> int:
     from .road import road_from_json, road_from_spec
     from .simulate import DEFAULT_SPEED, TrafficOptions, simulate
 
-    src = load_manifest(args.package)
+    src = load_manifest(args.package, allow_external=args.allow_external_assets)
     if args.road:
         road = road_from_spec(args.road, lanes=args.lanes)
     elif "road" in src.ground_truth:
