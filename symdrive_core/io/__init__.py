@@ -1,1 +1,57 @@
-"""File formats: splat PLY (numpy only), images via OpenImageIO, atomic writes."""
+"""File formats: splat PLY (numpy only), images via OpenImageIO, atomic writes.
+
+:func:`open_regular` opens a file for reading only if it is a regular file: a FIFO would block
+the reader forever and a device such as ``/dev/zero`` never ends.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+
+from ..errors import InputError
+
+
+def _describe_mode(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def check_regular(path, field: str | None = None) -> os.stat_result:
+    """``os.stat(path)`` of a regular file (symlinks followed), else :class:`InputError`."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError) as exc:
+        raise InputError(path, "file not found" if isinstance(exc, FileNotFoundError)
+                         else f"cannot open: {getattr(exc, 'strerror', None) or exc}", field) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(path, f"is {_describe_mode(st.st_mode)}, not a regular file", field)
+    return st
+
+
+def open_regular(path, field: str | None = None):
+    """``open(path, "rb")`` for a regular file only, checked on the opened descriptor (opening is
+    non-blocking, so a FIFO put in the file's place cannot hang it)."""
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except (OSError, ValueError) as exc:
+        raise InputError(path, "file not found" if isinstance(exc, FileNotFoundError)
+                         else f"cannot open: {getattr(exc, 'strerror', None) or exc}", field) from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise InputError(path, f"is {_describe_mode(mode)}, not a regular file", field)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise

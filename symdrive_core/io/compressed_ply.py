@@ -33,6 +33,37 @@ def is_compressed(element_names: list[str], vertex_properties: list[str]) -> boo
     return "chunk" in element_names and "packed_position" in vertex_properties
 
 
+def check_header(path: Path, elements: dict[str, tuple[int, list]]) -> None:
+    """The elements of a compressed splat file, from its header alone (``name: (count,
+    [(property, type), ...])``): the packed words are 32-bit unsigned, the chunks hold every
+    splat and carry their bounds, the ``sh`` rows match the splats. Nothing is allocated."""
+    n, vertex = elements["vertex"]
+    types = dict(vertex)
+    missing = [p for p in PACKED if p not in types]
+    if missing:
+        raise InputError(path, f"compressed splat file without {', '.join(missing)}", "element vertex")
+    wrong = [p for p in PACKED if types[p] != "u4"]
+    if wrong:
+        raise InputError(path, f"packed words must be uint32: {', '.join(wrong)}", "element vertex")
+    chunks, chunk_props = elements["chunk"]
+    if chunks * CHUNK_SIZE < n:
+        raise InputError(path, f"{chunks} chunks hold at most {chunks * CHUNK_SIZE} splats, the file has {n}",
+                         "element chunk")
+    names = [p for p, _ in chunk_props]
+    missing = [b for b in BOUNDS if b not in names]
+    if missing:
+        raise InputError(path, f"compressed splat file without {', '.join(missing)}", "element chunk")
+    if any(isinstance(t, tuple) for _, t in chunk_props):
+        raise InputError(path, "list properties are not allowed in chunks", "element chunk")
+    if "sh" in elements:
+        rows, sh_props = elements["sh"]
+        if rows != n:
+            raise InputError(path, f"element sh has {rows} rows for {n} splats", "element sh")
+        expected = [f"f_rest_{i}" for i in range(len(sh_props))]
+        if [p for p, _ in sh_props] != expected or len(sh_props) not in (9, 24, 45):
+            raise InputError(path, "expected f_rest_0..f_rest_M-1 with M = 9, 24 or 45", "element sh")
+
+
 def _unorm(words: np.ndarray, shift: int, bits: int) -> np.ndarray:
     return ((words >> np.uint32(shift)) & np.uint32((1 << bits) - 1)).astype(np.float64) / ((1 << bits) - 1)
 

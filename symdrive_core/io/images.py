@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from . import check_regular
 from .atomic import atomic_path
 
 
@@ -20,12 +21,42 @@ def _oiio():
     return oiio
 
 
+# Larger declared images are refused before their pixels are allocated (a 16384 x 16384 RGBA
+# float image is 4 GiB already).
+MAX_IMAGE_SIDE = 16384
+
+
+def image_size(path: str | os.PathLike, field: str | None = None) -> tuple[int, int, int]:
+    """(width, height, channels) from an image file's header alone; nothing is decoded.
+
+    Only regular files are opened, and a side larger than ``MAX_IMAGE_SIDE`` is an error.
+    """
+    path = Path(path)
+    check_regular(path, field)
+    oiio = _oiio()
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise InputError(path, f"cannot read image: {oiio.geterror() or 'unknown format'}", field)
+    try:
+        spec = inp.spec()
+        width, height, channels = int(spec.width), int(spec.height), int(spec.nchannels)
+    finally:
+        inp.close()
+    if width < 1 or height < 1 or channels < 1:
+        raise InputError(path, f"image header declares {width}x{height} with {channels} channels", field)
+    if width > MAX_IMAGE_SIDE or height > MAX_IMAGE_SIDE:
+        raise InputError(path, f"image is {width}x{height}; sides above {MAX_IMAGE_SIDE} pixels are not read",
+                         field)
+    return width, height, channels
+
+
 def read_image(path: str | os.PathLike, *, channels: int | None = None) -> np.ndarray:
     """Read an image as float32 [H, W, C]; ``channels`` keeps the first C (or repeats grey)."""
     oiio = _oiio()
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file not found")
+    image_size(path)  # a regular file of a sane size, checked before any pixel is allocated
     buf = oiio.ImageBuf(str(path))
     if buf.has_error:
         raise InputError(path, f"cannot read image: {buf.geterror()}")

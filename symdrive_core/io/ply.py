@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..gaussians import Gaussians, sh_coeff_count
-from . import compressed_ply
+from . import compressed_ply, open_regular
 from .atomic import atomic_path
 
 _PLY_TYPES = {
@@ -60,21 +60,56 @@ class PlyHeader:
         return next((e for e in self.elements if e.name == name), None)
 
 
+# Bounds checked before anything is allocated: a header is a few kB; these leave room for
+# any real file and stop a hostile one (a 100 MB "line", /dev/zero) from growing memory.
+MAX_HEADER_LINE = 64 * 1024
+MAX_HEADER_BYTES = 1024 * 1024
+
+
+def _row_bytes(fmt: str, el: _Element) -> int:
+    """The fewest bytes one row of ``el`` can take: exact without lists, a lower bound with
+    them (an empty list is just its count); in ascii, one digit and a separator per value."""
+    if fmt == "ascii":
+        return 2 * len(el.properties)
+    return sum(np.dtype(t[0] if isinstance(t, tuple) else t).itemsize for _, t in el.properties)
+
+
+def _truncated(path, el: _Element, offset: int, row: int, size: int, exact: bool = True) -> InputError:
+    need = offset + el.count * row
+    have = max(0, (size - offset) // max(row, 1))
+    rows = "vertices" if el.name == "vertex" else f"'{el.name}' rows"
+    at_least = "" if exact else "at least "
+    return InputError(
+        path,
+        f"truncated: header declares {el.count} {rows} ({at_least}{need} bytes with the header) "
+        f"but the file has {size} bytes (room for {have} {rows})",
+        f"element {el.name}",
+    )
+
+
 def read_header(path: str | os.PathLike) -> PlyHeader:
+    """The header of a PLY file, checked against the file before any data is read.
+
+    Only regular files are opened. Header lines longer than ``MAX_HEADER_LINE`` bytes, headers
+    longer than ``MAX_HEADER_BYTES``, negative counts, duplicate elements or properties, and
+    declared sizes the file cannot hold are :class:`InputError` naming the file and field.
+    """
     path = Path(path)
-    try:
-        f = open(path, "rb")
-    except OSError as exc:
-        raise InputError(path, f"cannot open: {exc.strerror}") from None
-    with f:
-        if f.readline().strip() != b"ply":
+    with open_regular(path) as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.readline(MAX_HEADER_LINE + 1).strip() != b"ply":
             raise InputError(path, "not a PLY file (first line is not 'ply')")
         fmt = None
         elements: list[_Element] = []
         while True:
-            raw = f.readline()
+            raw = f.readline(MAX_HEADER_LINE + 1)
             if not raw:
                 raise InputError(path, "header has no 'end_header' line")
+            if len(raw) > MAX_HEADER_LINE:
+                raise InputError(path, f"header line longer than {MAX_HEADER_LINE} bytes", "header")
+            if f.tell() > MAX_HEADER_BYTES:
+                raise InputError(path, f"header longer than {MAX_HEADER_BYTES} bytes without 'end_header'",
+                                 "header")
             words = raw.decode("ascii", errors="replace").split()
             if not words or words[0] in ("comment", "obj_info"):
                 continue
@@ -82,27 +117,103 @@ def read_header(path: str | os.PathLike) -> PlyHeader:
                 break
             if words[0] == "format":
                 if len(words) < 2 or words[1] not in _FORMATS:
-                    raise InputError(path, f"unsupported format line {raw.strip()!r}", "header.format")
+                    raise InputError(path, f"unsupported format line {raw.strip()[:80]!r}", "header.format")
                 fmt = _FORMATS[words[1]]
             elif words[0] == "element":
                 try:
-                    elements.append(_Element(words[1], int(words[2]), []))
+                    name, count = words[1], int(words[2])
                 except (IndexError, ValueError):
-                    raise InputError(path, f"bad element line {raw.strip()!r}", "header") from None
+                    raise InputError(path, f"bad element line {raw.strip()[:80]!r}", "header") from None
+                if count < 0:
+                    raise InputError(path, f"negative count {count}", f"element {name}")
+                if any(e.name == name for e in elements):
+                    raise InputError(path, "element declared twice", f"element {name}")
+                elements.append(_Element(name, count, []))
             elif words[0] == "property":
                 if not elements:
                     raise InputError(path, "property before any element", "header")
                 el = elements[-1]
                 try:
                     if words[1] == "list":
-                        el.properties.append((words[4], (_PLY_TYPES[words[2]], _PLY_TYPES[words[3]])))
+                        prop = (words[4], (_PLY_TYPES[words[2]], _PLY_TYPES[words[3]]))
                     else:
-                        el.properties.append((words[2], _PLY_TYPES[words[1]]))
+                        prop = (words[2], _PLY_TYPES[words[1]])
                 except (IndexError, KeyError):
-                    raise InputError(path, f"bad property line {raw.strip()!r}", f"element {el.name}") from None
+                    raise InputError(path, f"bad property line {raw.strip()[:80]!r}",
+                                     f"element {el.name}") from None
+                if any(n == prop[0] for n, _ in el.properties):
+                    raise InputError(path, f"duplicate property {prop[0]!r}", f"element {el.name}")
+                el.properties.append(prop)
         if fmt is None:
             raise InputError(path, "header has no format line", "header.format")
-        return PlyHeader(fmt, elements, f.tell())
+        header = PlyHeader(fmt, elements, f.tell())
+    _check_sizes(path, header, size)
+    return header
+
+
+def _check_sizes(path: Path, header: PlyHeader, size: int) -> None:
+    """Every declared element fits in the file: a declared size larger than the file is an
+    error here, never an allocation later."""
+    offset = header.data_offset
+    for el in header.elements:
+        if el.count and not el.properties:
+            raise InputError(path, f"declares {el.count} rows with no properties", f"element {el.name}")
+        row = _row_bytes(header.fmt, el)
+        if header.fmt == "ascii":
+            need = offset + max(0, el.count * row - 1)
+            if need > size:
+                rows = "vertices" if el.name == "vertex" else "rows"
+                raise InputError(path, f"header declares {el.count} {rows} of {len(el.properties)} values, "
+                                       f"more than the file's {size} bytes can hold", f"element {el.name}")
+        else:
+            need = offset + el.count * row
+            if need > size:
+                raise _truncated(path, el, offset, row, size, exact=not el.has_lists)
+        offset = need
+
+
+def check_ply(path: str | os.PathLike, kind: str = "splats") -> PlyHeader:
+    """Check a PLY without reading its data: the header, the declared sizes against the file,
+    and the properties a ``kind`` of file needs ("splats": a 3DGS or compressed splat file,
+    "points": a coloured point cloud). ``symdrive validate`` runs this on every PLY it names."""
+    path = Path(path)
+    header = read_header(path)
+    vertex = header.element("vertex")
+    if vertex is None:
+        raise InputError(path, "no 'vertex' element: not a point or splat file", "element vertex")
+    if vertex.has_lists:
+        raise InputError(path, "list properties in the vertex element are not supported", "element vertex")
+    names = [n for n, _ in vertex.properties]
+    if kind == "points":
+        missing = [c for c in ("x", "y", "z") if c not in names]
+        if missing:
+            raise InputError(path, f"point cloud lacks {', '.join(missing)}", "element vertex")
+    elif compressed_ply.is_compressed([e.name for e in header.elements], names):
+        if header.fmt == "ascii":
+            raise InputError(path, "compressed splat files are binary; this one says ascii", "header.format")
+        compressed_ply.check_header(path, {e.name: (e.count, e.properties) for e in header.elements})
+    else:
+        _splat_layout(path, names)
+    return header
+
+
+def _splat_layout(path: Path, names: list[str]) -> tuple[bool, int]:
+    """(2DGS surfels?, SH coefficients per channel) of a 3DGS vertex table with these properties."""
+    surfels = "scale_2" not in names and {"scale_0", "scale_1"} <= set(names)  # a 2DGS file
+    missing = [n for n in REQUIRED if n not in names and not (surfels and n == "scale_2")]
+    if missing:
+        kind = "not a 3DGS splat file" if len(missing) > 3 else "missing required property"
+        raise InputError(path, f"{kind}: no {', '.join(missing)}", "element vertex")
+    rest_idx = sorted(int(m.group(1)) for n in names if (m := _F_REST.match(n)))
+    if rest_idx != list(range(len(rest_idx))):
+        raise InputError(path, "f_rest_* properties are not numbered 0..M-1", "element vertex")
+    if len(rest_idx) % 3:
+        raise InputError(path, f"{len(rest_idx)} f_rest_* properties is not a multiple of 3", "f_rest")
+    k = len(rest_idx) // 3 + 1
+    degree = int(round(np.sqrt(k))) - 1
+    if (degree + 1) ** 2 != k or degree > 3:
+        raise InputError(path, f"{len(rest_idx)} f_rest_* properties matches no SH degree 0..3", "f_rest")
+    return surfels, k
 
 
 def _read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
@@ -120,33 +231,30 @@ def _read_binary_tables(path: Path, header: PlyHeader, wanted: tuple[str, ...]) 
     """The tables of the elements named ``wanted`` of a binary PLY, in native byte order."""
     tables: dict[str, np.ndarray] = {}
     offset = header.data_offset
-    size = path.stat().st_size
-    for el in header.elements:
-        if len(tables) == len(wanted):
-            break
-        if el.has_lists:
-            raise InputError(path, f"element '{el.name}' has list properties, which splat files do not use",
-                             f"element {el.name}")
-        dtype = np.dtype([(n, header.fmt + t) for n, t in el.properties])
-        need = offset + el.count * dtype.itemsize
-        if el.name in wanted:
-            if size < need:
-                have = max(0, (size - offset) // max(dtype.itemsize, 1))
-                rows = "vertices" if el.name == "vertex" else f"'{el.name}' rows"
-                raise InputError(
-                    path,
-                    f"truncated: header declares {el.count} {rows} ({need} bytes with the header) "
-                    f"but the file has {size} bytes (room for {have} {rows})",
-                    f"element {el.name}",
-                )
-            table = np.fromfile(path, dtype=dtype, count=el.count, offset=offset)
-            tables[el.name] = table if dtype.isnative else table.astype(dtype.newbyteorder("="))
-        offset = need
+    with open_regular(path) as f:
+        size = os.fstat(f.fileno()).st_size
+        for el in header.elements:
+            if len(tables) == len(wanted):
+                break
+            if el.has_lists:
+                raise InputError(path, f"element '{el.name}' has list properties, which splat files do not use",
+                                 f"element {el.name}")
+            dtype = np.dtype([(n, header.fmt + t) for n, t in el.properties])
+            need = offset + el.count * dtype.itemsize
+            if el.name in wanted:
+                if size < need:  # the file changed since its header was read
+                    raise _truncated(path, el, offset, dtype.itemsize, size)
+                f.seek(offset)
+                table = np.fromfile(f, dtype=dtype, count=el.count)
+                if table.shape[0] != el.count:
+                    raise _truncated(path, el, offset, dtype.itemsize, offset + table.nbytes)
+                tables[el.name] = table if dtype.isnative else table.astype(dtype.newbyteorder("="))
+            offset = need
     return tables
 
 
 def _read_ascii_vertices(path: Path, header: PlyHeader, vertex: _Element) -> np.ndarray:
-    with open(path, "rb") as f:
+    with open_regular(path) as f:
         f.seek(header.data_offset)
         lines = f.read().decode("ascii", errors="replace").splitlines()
     skip = 0
@@ -203,22 +311,11 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
     if compressed_ply.is_compressed([e.name for e in header.elements], names):
         if header.fmt == "ascii":
             raise InputError(path, "compressed splat files are binary; this one says ascii", "header.format")
+        compressed_ply.check_header(path, {e.name: (e.count, e.properties) for e in header.elements})
         wanted = ("chunk", "vertex", "sh") if header.element("sh") else ("chunk", "vertex")
         return _checked(path, compressed_ply.decode(path, _read_binary_tables(path, header, wanted)), drop_invalid)
-    surfels = "scale_2" not in names and {"scale_0", "scale_1"} <= set(names)  # a 2DGS file
-    missing = [n for n in REQUIRED if n not in names and not (surfels and n == "scale_2")]
-    if missing:
-        kind = "not a 3DGS splat file" if len(missing) > 3 else "missing required property"
-        raise InputError(path, f"{kind}: no {', '.join(missing)}", "element vertex")
-    rest_idx = sorted(int(m.group(1)) for n in names if (m := _F_REST.match(n)))
-    if rest_idx != list(range(len(rest_idx))):
-        raise InputError(path, "f_rest_* properties are not numbered 0..M-1", "element vertex")
-    if len(rest_idx) % 3:
-        raise InputError(path, f"{len(rest_idx)} f_rest_* properties is not a multiple of 3", "f_rest")
-    k = len(rest_idx) // 3 + 1
+    surfels, k = _splat_layout(path, names)
     degree = int(round(np.sqrt(k))) - 1
-    if (degree + 1) ** 2 != k or degree > 3:
-        raise InputError(path, f"{len(rest_idx)} f_rest_* properties matches no SH degree 0..3", "f_rest")
 
     n = table.shape[0]
     sh = np.empty((n, k, 3), dtype=np.float32)

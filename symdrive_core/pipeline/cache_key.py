@@ -50,6 +50,6 @@ def inputs_key(manifest, plan_options=None, stage_options=None, device: str = "c
         "stage_options": asdict(stage_options) if stage_options is not None else None,
         "device": device,
         "code": code_version(),
-        "files": {rel: file_identity(manifest.resolve(rel)) for _, rel in manifest.file_refs()},
+        "files": {rel: file_identity(manifest.resolve(rel)) for _, rel in manifest.asset_refs()},
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -79,6 +79,7 @@ def reconstruct_stage(ctx) -> dict:
 
     out = ctx.tree.folder("reconstruction")
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
+    ctx.manifest.allow_reads_from(out)  # the run's own output, not a path the package named
     ctx.manifest.background_splats = str((out / "background.ply").resolve())
     return {k: v for k, v in vars(result).items() if isinstance(v, (int, float))}
 

@@ -18,13 +18,25 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
+from ..io import open_regular
 from ..io.atomic import write_text_atomic
+from ..io.images import MAX_IMAGE_SIDE
+from .paths import check_name, check_path_text, check_relative, is_inside, real, resolve_inside
 from .poses import Pose
 
 FORMAT = "symdrive-scene"
 VERSION = 1
 ACTOR_KINDS = ("existing", "inserted")
 SCHEMA_PATH = Path(__file__).with_name("manifest.schema.json")
+# Bounds that keep every later computation finite (float32 included) and every allocation small.
+FOCAL_RANGE = (1e-2, 1e7)  # fx, fy in pixels
+PRINCIPAL_MAX = 1e7  # |cx|, |cy|, |skew| in pixels
+COORD_MAX = 1e7  # |translation| in metres: 10 000 km holds UTM and Earth-centred coordinates
+WLH_MAX = 1000.0  # metres
+OFFSET_MAX = 1000.0  # lateral offsets, metres
+ID_MAX = 65535  # instance ids: id maps are 16-bit
+JSON_DEPTH_MAX = 64
+MANIFEST_BYTES_MAX = 512 * 1024 * 1024
 
 
 class ManifestError(InputError):
@@ -122,9 +134,69 @@ class Manifest:
     ground_truth: dict = field(default_factory=dict)
     root: Path = field(default_factory=Path.cwd)
     path: Path | None = None
+    # Whether asset paths may lead outside the package (``--allow-external-assets``).
+    allow_external: bool = field(default=False, compare=False)
+    # Folders besides the package the program itself trusts for reads (``allow_reads_from``).
+    read_roots: list[Path] = field(default_factory=list, compare=False, repr=False)
 
-    def resolve(self, rel: str | None) -> Path | None:
-        return None if rel is None else (self.root / rel)
+    def resolve(self, rel: str | None, where: str | None = None) -> Path | None:
+        """``rel`` (a path from the manifest) as a path to read, refused with :class:`InputError`
+        naming the field unless it lies inside the package once symlinks are resolved (absolute
+        paths and ``..`` that climb out included), or ``allow_external`` was given at load, or
+        it lies in a folder passed to :meth:`allow_reads_from`. FIFOs, devices and sockets are
+        refused in every case."""
+        if rel is None:
+            return None
+        return resolve_inside(self.root, rel, where or self.field_of(rel), self.path or self.root,
+                              allow_external=self.allow_external, also=self.read_roots)
+
+    def allow_reads_from(self, folder: str | os.PathLike) -> None:
+        """Let :meth:`resolve` accept files under ``folder`` (a folder the program wrote, such as
+        the run's output, not one the package names)."""
+        folder = real(folder)
+        if folder not in self.read_roots:
+            self.read_roots.append(folder)
+
+    def asset_refs(self) -> list[tuple[str, str]]:
+        """(field path, path as written) of every file the manifest names outside ``ground_truth``."""
+        refs: list[tuple[str, str | None]] = [("background.splats", self.background_splats),
+                                              ("background.points", self.background_points)]
+        for ci, c in enumerate(self.cameras):
+            for fi, cf in enumerate(c.frames):
+                refs += [(f"cameras[{ci}].frames[{fi}].image", cf.image),
+                         (f"cameras[{ci}].frames[{fi}].depth", cf.depth)]
+        for ai, a in enumerate(self.actors):
+            refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh)]
+        for mi, e in enumerate(self.masks):
+            refs += [(f"masks.entries[{mi}].amodal", e.amodal), (f"masks.entries[{mi}].visible", e.visible)]
+        for mi, e in enumerate(self.id_maps):
+            refs.append((f"masks.id_maps[{mi}].path", e.path))
+        return [(w, r) for w, r in refs if r is not None]
+
+    def field_of(self, rel: str) -> str:
+        """The field path that holds ``rel`` (for messages), ``ground_truth`` included."""
+        for where, r in self.asset_refs():
+            if r == rel:
+                return where
+        stack: list[tuple[str, Any]] = [("ground_truth", self.ground_truth)]
+        while stack:
+            where, v = stack.pop()
+            if v == rel:
+                return where
+            if isinstance(v, dict):
+                stack += [(f"{where}.{k}", x) for k, x in v.items()]
+            elif isinstance(v, list):
+                stack += [(f"{where}[{i}]", x) for i, x in enumerate(v)]
+        return "path"
+
+    def output_dir(self) -> Path:
+        """The package's output folder (``output``, relative), refused if a symlink on the way
+        leads it out of the package."""
+        out = self.root / check_relative(self.output, "output", self.path or self.root)
+        if not is_inside(out, self.root):
+            raise ManifestError(self.path or self.root, f"{self.output!r} leads outside the package (a symlink)",
+                                "output")
+        return out
 
     def camera(self, name: str) -> Camera:
         for c in self.cameras:
@@ -141,22 +213,6 @@ class Manifest:
     @property
     def inserted_actors(self) -> list[Actor]:
         return [a for a in self.actors if a.kind == "inserted"]
-
-    def file_refs(self) -> list[tuple[str, str]]:
-        """Every file the manifest names, as (field, path as written)."""
-        refs: list[tuple[str, str | None]] = [("background.splats", self.background_splats),
-                                              ("background.points", self.background_points)]
-        for ci, c in enumerate(self.cameras):
-            for fi, cf in enumerate(c.frames):
-                refs += [(f"cameras[{ci}].frames[{fi}].image", cf.image),
-                         (f"cameras[{ci}].frames[{fi}].depth", cf.depth)]
-        for ai, a in enumerate(self.actors):
-            refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh)]
-        for mi, e in enumerate(self.masks):
-            refs += [(f"masks.entries[{mi}].amodal", e.amodal), (f"masks.entries[{mi}].visible", e.visible)]
-        for mi, e in enumerate(self.id_maps):
-            refs.append((f"masks.id_maps[{mi}].path", e.path))
-        return [(where, rel) for where, rel in refs if rel is not None]
 
     def to_json(self) -> dict:
         def camera_frame(cf: CameraFrame) -> dict:
@@ -238,17 +294,46 @@ class _Reader:
             self.fail(where, f"expected a list, got {type(v).__name__}")
         return v
 
-    def num(self, v, where) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+    def num(self, v, where, bound=None) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(where, f"expected a finite number, got {v!r}")
-        return float(v)
+        try:
+            x = float(v)
+        except OverflowError:  # an integer too large for a float
+            x = float("inf")
+        if not np.isfinite(x):
+            self.fail(where, f"expected a finite number, got {v!r}")
+        if bound is not None and abs(x) > bound:
+            self.fail(where, f"expected a number within +-{bound:g}, got {x:g}")
+        return x
 
-    def integer(self, v, where, minimum=None) -> int:
+    def integer(self, v, where, minimum=None, maximum=None) -> int:
         if isinstance(v, bool) or not isinstance(v, int):
             self.fail(where, f"expected an integer, got {v!r}")
         if minimum is not None and v < minimum:
             self.fail(where, f"expected an integer >= {minimum}, got {v}")
+        if maximum is not None and v > maximum:
+            self.fail(where, f"expected an integer <= {maximum}, got {v}")
         return v
+
+    def _checked(self, check, v, where):
+        try:
+            return check(v, where, self.path)
+        except ManifestError:
+            raise
+        except InputError as exc:
+            self.fail(where, exc.message)
+
+    def name(self, v, where) -> str:
+        return self._checked(check_name, v, where)
+
+    def ref(self, v, where, allow_none=True) -> str | None:
+        if v is None and allow_none:
+            return None
+        return self._checked(check_path_text, v, where)
+
+    def output(self, v) -> str:
+        return self._checked(check_relative, v, "output")
 
     def string(self, v, where, allow_none=False) -> str | None:
         if v is None and allow_none:
@@ -266,7 +351,10 @@ class _Reader:
         if (not isinstance(v, list) or len(v) != n
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
             self.fail(where, f"expected {n} numbers")
-        a = np.asarray(v, dtype=np.float64)
+        try:
+            a = np.asarray(v, dtype=np.float64)
+        except OverflowError:  # an integer too large for a float
+            self.fail(where, "expected finite numbers")
         if not np.all(np.isfinite(a)):
             self.fail(where, "expected finite numbers")
         return a
@@ -283,15 +371,31 @@ def _rigid_ok(M: np.ndarray) -> bool:
             and np.allclose(M[3], [0, 0, 0, 1]))
 
 
-def parse_manifest(data: Any, path: Path) -> Manifest:
+def _check_depth(rd: "_Reader", data: Any) -> None:
+    """No value nested deeper than ``JSON_DEPTH_MAX`` (iteratively: deep input cannot recurse)."""
+    stack: list[tuple[Any, int, str]] = [(data, 0, "(root)")]
+    while stack:
+        v, depth, where = stack.pop()
+        if depth > JSON_DEPTH_MAX:
+            rd.fail(where, f"nested deeper than {JSON_DEPTH_MAX} levels")
+        if isinstance(v, dict):
+            stack += [(x, depth + 1, f"{where}.{k}" if where != "(root)" else str(k)) for k, x in v.items()]
+        elif isinstance(v, list):
+            stack += [(x, depth + 1, f"{where}[{i}]") for i, x in enumerate(v)]
+
+
+def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Manifest:
+    """A :class:`Manifest` from parsed JSON, every field checked (``path``: the file it came
+    from, whose folder is the package root; ``allow_external``: asset paths may lead outside it)."""
     rd = _Reader(path)
+    _check_depth(rd, data)
     d = rd.obj(data, "(root)")
     if d.get("format", FORMAT) != FORMAT:
         rd.fail("format", f"expected {FORMAT!r}, got {d.get('format')!r}")
     version = rd.integer(rd.key(d, "version", ""), "version")
     if version != VERSION:
         rd.fail("version", f"this reader understands version {VERSION}, got {version}")
-    name = rd.string(rd.key(d, "name", ""), "name")
+    name = rd.name(rd.key(d, "name", ""), "name")
 
     frames = []
     for i, f in enumerate(rd.lst(rd.key(d, "frames", ""), "frames")):
@@ -312,11 +416,11 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
     for ci, c in enumerate(rd.lst(rd.key(d, "cameras", ""), "cameras")):
         w = f"cameras[{ci}]"
         c = rd.obj(c, w)
-        cname = rd.string(rd.key(c, "name", w), f"{w}.name")
+        cname = rd.name(rd.key(c, "name", w), f"{w}.name")
         if any(x.name == cname for x in cameras):
             rd.fail(f"{w}.name", f"duplicate camera name {cname!r}")
-        width = rd.integer(rd.key(c, "width", w), f"{w}.width", 1)
-        height = rd.integer(rd.key(c, "height", w), f"{w}.height", 1)
+        width = rd.integer(rd.key(c, "width", w), f"{w}.width", 1, MAX_IMAGE_SIDE)
+        height = rd.integer(rd.key(c, "height", w), f"{w}.height", 1, MAX_IMAGE_SIDE)
         cfs = rd.lst(rd.key(c, "frames", w), f"{w}.frames")
         if len(cfs) != nf:
             rd.fail(f"{w}.frames", f"expected {nf} entries (one per frame), got {len(cfs)}")
@@ -327,9 +431,16 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
             K = rd.matrix(rd.key(cf, "K", wf), 3, 3, f"{wf}.K")
             if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
                 rd.fail(f"{wf}.K", "expected [[fx,s,cx],[0,fy,cy],[0,0,1]] with fx, fy > 0")
+            lo, hi = FOCAL_RANGE
+            if not (lo <= K[0, 0] <= hi and lo <= K[1, 1] <= hi):
+                rd.fail(f"{wf}.K", f"fx, fy must lie in [{lo:g}, {hi:g}] pixels, got {K[0, 0]:g}, {K[1, 1]:g}")
+            if np.abs(K[:2, [1, 2]]).max() > PRINCIPAL_MAX:
+                rd.fail(f"{wf}.K", f"skew, cx and cy must lie within {PRINCIPAL_MAX:g} pixels")
             c2w = rd.matrix(rd.key(cf, "camera_to_world", wf), 4, 4, f"{wf}.camera_to_world")
             if not _rigid_ok(c2w):
                 rd.fail(f"{wf}.camera_to_world", "not a rigid transform (rotation must be orthonormal, det +1)")
+            if np.abs(c2w[:3, 3]).max() > COORD_MAX:
+                rd.fail(f"{wf}.camera_to_world", f"position beyond {COORD_MAX:g} m")
             if "world_to_camera" in cf:
                 w2c = rd.matrix(cf["world_to_camera"], 4, 4, f"{wf}.world_to_camera")
                 scale = 1.0 + np.abs(c2w[:3, 3]).max()
@@ -339,8 +450,8 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
                 w2c = conventions.invert_rigid(c2w)
             camera_frames.append(CameraFrame(
                 K, c2w, w2c,
-                rd.string(cf.get("image"), f"{wf}.image", allow_none=True),
-                rd.string(cf.get("depth"), f"{wf}.depth", allow_none=True)))
+                rd.ref(cf.get("image"), f"{wf}.image"),
+                rd.ref(cf.get("depth"), f"{wf}.depth")))
         cameras.append(Camera(cname, width, height, camera_frames))
     if not cameras:
         rd.fail("cameras", "expected at least one camera")
@@ -350,15 +461,15 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
     for ai, a in enumerate(rd.lst(d.get("actors", []), "actors")):
         w = f"actors[{ai}]"
         a = rd.obj(a, w)
-        aid = rd.string(rd.key(a, "id", w), f"{w}.id")
+        aid = rd.name(rd.key(a, "id", w), f"{w}.id")
         if any(x.id == aid for x in actors):
             rd.fail(f"{w}.id", f"duplicate actor id {aid!r}")
         kind = rd.key(a, "kind", w)
         if kind not in ACTOR_KINDS:
             rd.fail(f"{w}.kind", f"expected one of {', '.join(ACTOR_KINDS)}, got {kind!r}")
         assets = rd.obj(rd.key(a, "assets", w), f"{w}.assets")
-        splats = rd.string(assets.get("splats"), f"{w}.assets.splats", allow_none=True)
-        mesh = rd.string(assets.get("mesh"), f"{w}.assets.mesh", allow_none=True)
+        splats = rd.ref(assets.get("splats"), f"{w}.assets.splats")
+        mesh = rd.ref(assets.get("mesh"), f"{w}.assets.mesh")
         if splats is None and mesh is None:
             rd.fail(f"{w}.assets", "expected a splat PLY and/or a mesh path")
         wlh = None
@@ -366,6 +477,8 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
             wlh = rd.vector(a["wlh"], 3, f"{w}.wlh")
             if np.any(wlh <= 0):
                 rd.fail(f"{w}.wlh", "sizes must be positive metres")
+            if np.any(wlh > WLH_MAX):
+                rd.fail(f"{w}.wlh", f"sizes must be at most {WLH_MAX:g} m, got {', '.join(f'{v:g}' for v in wlh)}")
         plist = rd.lst(rd.key(a, "poses", w), f"{w}.poses")
         if len(plist) != nf:
             rd.fail(f"{w}.poses", f"expected {nf} entries (one per frame, null where absent), got {len(plist)}")
@@ -377,12 +490,14 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
                 continue
             p = rd.obj(p, wp)
             t = rd.vector(rd.key(p, "translation", wp), 3, f"{wp}.translation")
+            if np.abs(t).max() > COORD_MAX:
+                rd.fail(f"{wp}.translation", f"beyond {COORD_MAX:g} m")
             q = rd.vector(rd.key(p, "rotation", wp), 4, f"{wp}.rotation")
             norm = np.linalg.norm(q)
             if norm < 1e-8:
                 rd.fail(f"{wp}.rotation", "zero quaternion (expected unit w, x, y, z)")
             poses.append(Pose(t, q / norm))
-        iid = rd.integer(a.get("instance_id", ai + 1), f"{w}.instance_id", 1)
+        iid = rd.integer(a.get("instance_id", ai + 1), f"{w}.instance_id", 1, ID_MAX)
         if any(x.instance_id == iid for x in actors):
             rd.fail(f"{w}.instance_id", f"duplicate instance id {iid}")
         actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid))
@@ -404,8 +519,8 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
         if act not in actor_ids:
             rd.fail(f"{w}.actor", f"no actor with id {act!r}")
         masks.append(MaskEntry(cam, fr, act,
-                               rd.string(m.get("amodal"), f"{w}.amodal", allow_none=True),
-                               rd.string(m.get("visible"), f"{w}.visible", allow_none=True)))
+                               rd.ref(m.get("amodal"), f"{w}.amodal"),
+                               rd.ref(m.get("visible"), f"{w}.visible")))
     id_maps = []
     for mi, m in enumerate(rd.lst(masks_obj.get("id_maps", []), "masks.id_maps")):
         w = f"masks.id_maps[{mi}]"
@@ -418,15 +533,15 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
             rd.fail(f"{w}.frame", f"frame {fr} out of range (package has {nf})")
         ids = {}
         for k, v in rd.obj(rd.key(m, "ids", w), f"{w}.ids").items():
-            if not k.isdigit() or int(k) == 0:
-                rd.fail(f"{w}.ids", f"keys are positive integer ids as strings, got {k!r}")
+            if not (k.isascii() and k.isdigit() and len(k) <= 5) or not 0 < int(k) <= ID_MAX:
+                rd.fail(f"{w}.ids", f"keys are positive integer ids (1..{ID_MAX}) as strings, got {k!r}")
             if v not in actor_ids:
                 rd.fail(f"{w}.ids.{k}", f"no actor with id {v!r}")
             ids[int(k)] = v
-        id_maps.append(IdMap(cam, fr, rd.string(rd.key(m, "path", w), f"{w}.path"), ids))
+        id_maps.append(IdMap(cam, fr, rd.ref(rd.key(m, "path", w), f"{w}.path", allow_none=False), ids))
 
     e = rd.obj(d.get("effects", {}), "effects")
-    offsets = [rd.num(v, f"effects.lateral_offsets[{i}]")
+    offsets = [rd.num(v, f"effects.lateral_offsets[{i}]", OFFSET_MAX)
                for i, v in enumerate(rd.lst(e.get("lateral_offsets", []), "effects.lateral_offsets"))]
     sun = None
     if e.get("sun_direction") is not None:
@@ -446,31 +561,133 @@ def parse_manifest(data: Any, path: Path) -> Manifest:
     gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
     return Manifest(
         name=name, frames=frames, cameras=cameras, actors=actors,
-        background_splats=rd.string(bg.get("splats"), "background.splats", allow_none=True),
-        background_points=rd.string(bg.get("points"), "background.points", allow_none=True),
+        background_splats=rd.ref(bg.get("splats"), "background.splats"),
+        background_points=rd.ref(bg.get("points"), "background.points"),
         masks=masks, id_maps=id_maps, effects=effects,
-        output=rd.string(d.get("output", "output"), "output"), ground_truth=gt,
-        root=path.parent, path=path)
+        output=rd.output(d.get("output", "output")), ground_truth=gt,
+        root=path.parent, path=path, allow_external=allow_external)
 
 
 def load_manifest(path: str | os.PathLike, *, allow_external: bool = False) -> Manifest:
-    """Load and validate ``manifest.json`` (or a package directory containing one)."""
+    """Load and validate ``manifest.json`` (or a package directory containing one).
+
+    ``allow_external``: asset paths may lead outside the package (absolute paths, ``..``,
+    symlinks out), as ``--allow-external-assets`` asks; otherwise :meth:`Manifest.resolve` and
+    :func:`check_files` refuse them.
+    """
     path = Path(path)
     if path.is_dir():
         path = path / "manifest.json"
+    with open_regular(path) as f:
+        raw = f.read(MANIFEST_BYTES_MAX + 1)
+    if len(raw) > MANIFEST_BYTES_MAX:
+        raise ManifestError(path, f"larger than {MANIFEST_BYTES_MAX} bytes: not a manifest")
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ManifestError(path, f"cannot read: {exc.strerror}") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ManifestError(path, f"not UTF-8 text (byte {exc.start})") from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ManifestError(path, f"not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
-    return parse_manifest(data, path)
+    except RecursionError:
+        raise ManifestError(path, f"not a manifest: JSON nested deeper than {JSON_DEPTH_MAX} levels") from None
+    except ValueError as exc:  # e.g. an integer literal with thousands of digits
+        raise ManifestError(path, f"not valid JSON: {exc}") from None
+    return parse_manifest(data, path, allow_external=allow_external)
 
 
-def check_files(m: Manifest) -> None:
-    """Every file the manifest names exists (``symdrive validate`` runs this too)."""
-    for where, rel in m.file_refs():
-        if not (m.root / rel).exists():
-            raise ManifestError(m.path or m.root, f"file not found: {rel}", where)
+# What an asset file's header is checked against: how each field's files are read.
+_MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
+_OBJ_KEYWORDS = {b"v", b"vn", b"vt", b"vp", b"f", b"l", b"p", b"o", b"g", b"s", b"mtllib", b"usemtl"}
+
+
+def _check_mesh(path: Path) -> None:
+    """A mesh is non-empty and recognisable as OBJ, glTF (binary or JSON) or PLY; only its
+    first bytes are read."""
+    from ..io import check_regular
+
+    st = check_regular(path)
+    if st.st_size == 0:
+        raise InputError(path, "empty file", "mesh")
+    with open_regular(path) as f:
+        head = f.read(64 * 1024)
+    suffix = path.suffix.lower()
+    if head.startswith(b"glTF"):
+        return
+    if head.startswith(b"ply"):
+        from ..io.ply import read_header
+
+        header = read_header(path)
+        if header.element("vertex") is None:
+            raise InputError(path, "PLY mesh has no 'vertex' element", "element vertex")
+        return
+    if suffix == ".gltf" and head.lstrip().startswith(b"{"):
+        return
+    if suffix in (".obj", "") or suffix not in _MESH_SUFFIXES:
+        for line in head.splitlines()[:-1] or head.splitlines():
+            words = line.split()
+            if not words or words[0].startswith(b"#"):
+                continue
+            if words[0] in _OBJ_KEYWORDS:
+                return
+            break
+    raise InputError(path, "not a mesh this reader recognises (OBJ, glTF/GLB or PLY)", "mesh")
+
+
+def _check_image(path: Path, size: tuple[int, int] | None) -> None:
+    """An image's header (no pixels decoded), and its size against the camera's."""
+    try:
+        from ..io.images import image_size
+
+        width, height, _ = image_size(path)
+    except ImportError:  # no OpenImageIO here: a regular, non-empty file at least
+        from ..io import check_regular
+
+        if check_regular(path).st_size == 0:
+            raise InputError(path, "empty file") from None
+        return
+    if size is not None and (width, height) != size:
+        raise InputError(path, f"image is {width}x{height}, the camera is {size[0]}x{size[1]}")
+
+
+def check_files(m: Manifest, *, headers: bool = True) -> None:
+    """Every file the manifest names lies inside the package (unless it was loaded with
+    ``allow_external``), exists, and (``headers``) has a header that fits: PLY header and
+    vertex count against the file size, image header and size against the camera's, mesh
+    header. No data is loaded. ``symdrive validate`` and ``symdrive run`` run this."""
+    sizes = {c.name: (c.width, c.height) for c in m.cameras}
+    kinds: dict[str, tuple[str, tuple[int, int] | None]] = {
+        "background.splats": ("splats", None), "background.points": ("points", None)}
+    for ci, c in enumerate(m.cameras):
+        for fi in range(len(c.frames)):
+            for key in ("image", "depth"):
+                kinds[f"cameras[{ci}].frames[{fi}].{key}"] = ("image", sizes[c.name])
+    for ai in range(len(m.actors)):
+        kinds[f"actors[{ai}].assets.splats"] = ("splats", None)
+        kinds[f"actors[{ai}].assets.mesh"] = ("mesh", None)
+    for mi, e in enumerate(m.masks):
+        for key in ("amodal", "visible"):
+            kinds[f"masks.entries[{mi}].{key}"] = ("image", sizes.get(e.camera))
+    for mi, e in enumerate(m.id_maps):
+        kinds[f"masks.id_maps[{mi}].path"] = ("image", sizes.get(e.camera))
+    where_file = m.path or m.root
+    for where, rel in m.asset_refs():
+        full = m.resolve(rel, where)
+        if not full.exists():
+            raise ManifestError(where_file, f"file not found: {rel}", where)
+        if not headers:
+            continue
+        kind, size = kinds.get(where, ("", None))
+        try:
+            if kind in ("splats", "points"):
+                from ..io.ply import check_ply
+
+                check_ply(full, kind)
+            elif kind == "mesh":
+                _check_mesh(full)
+            elif kind == "image":
+                _check_image(full, size)
+        except InputError as exc:
+            detail = f"{exc.field}: {exc.message}" if exc.field else exc.message
+            raise ManifestError(where_file, f"{rel}: {detail}", where) from None
