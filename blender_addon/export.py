@@ -241,10 +241,13 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                 ),
             )
             manifest.save(work / "manifest.json")
-            scene_pkg.check_files(scene_pkg.load_manifest(work / "manifest.json"))  # the core's own check
+            # The core's own check; without copied assets the package names the user's own files
+            # outside it, which the user's later runs read with --allow-external-assets.
+            external = not options.copy_assets
+            scene_pkg.check_files(scene_pkg.load_manifest(work / "manifest.json", allow_external=external))
     finally:
         scene.frame_set(original_frame)
-    return scene_pkg.load_manifest(out / "manifest.json")
+    return scene_pkg.load_manifest(out / "manifest.json", allow_external=not options.copy_assets)
 
 
 def _manifest_actor(a: _Actor, poses, asset: _AssetPaths) -> scene_pkg.Actor:

@@ -26,7 +26,7 @@ def exported(blender, tmp_path):
 
 def test_two_vehicles_ten_frames_validate_in_the_core(exported):
     blender, objs, out = exported
-    m = load_manifest(out)
+    m = load_manifest(out, allow_external=True)  # assets not copied: the user's own files, outside
     check_files(m)
     jsonschema.validate(json.loads((out / "manifest.json").read_text()), json.loads(SCHEMA_PATH.read_text()))
     assert len(m.frames) == 10 and [f.timestamp for f in m.frames] == pytest.approx(np.arange(10) * 0.1)
@@ -56,7 +56,7 @@ def test_masks_match_the_core_projection_of_each_actor(exported):
     """The boundary check: the core projects each actor's mesh and splats with the exported
     camera and pose; Blender's amodal mask must agree on every frame."""
     _, _, out = exported
-    m = load_manifest(out)
+    m = load_manifest(out, allow_external=True)
     cam = m.cameras[0]
     masks = {(e.frame, e.actor): e for e in m.masks}
     ious = {}
@@ -86,7 +86,7 @@ def test_masks_match_the_core_projection_of_each_actor(exported):
 
 def test_visible_masks_are_amodal_minus_occluders(exported):
     _, _, out = exported
-    m = load_manifest(out)
+    m = load_manifest(out, allow_external=True)
     by_frame = {}
     for e in m.masks:
         amodal, visible = read_mask(m.resolve(e.amodal)) > 0.5, read_mask(m.resolve(e.visible)) > 0.5
@@ -109,7 +109,7 @@ def test_reexport_replaces_the_package_and_refuses_other_folders(exported, tmp_p
         directory=str(out), frame_start=3, frame_end=5, write_masks=False
     ) == {"FINISHED"}
     assert not (out / "stale.txt").exists() and not (out / "masks").exists()
-    m = load_manifest(out)
+    m = load_manifest(out, allow_external=True)
     assert len(m.frames) == 3 and m.masks == []
     other = tmp_path / "home"
     other.mkdir()
@@ -142,7 +142,7 @@ def test_absent_actor_has_null_pose_and_no_masks(blender, tmp_path):
     keyframes.key_presence(car_b, [1, 2, 3, 4], [True, True, False, False])
     out = tmp_path / "pkg"
     blender.ops.symdrive.export_scene(directory=str(out))
-    m = load_manifest(out)
+    m = load_manifest(out, allow_external=True)
     assert [p is None for p in m.actor("car_b").poses] == [False, False, True, True]
     assert sorted((e.frame, e.actor) for e in m.masks if e.actor == "car_b") == [(0, "car_b"), (1, "car_b")]
     assert all(m.id_maps[i].ids == {1: "car_a"} for i in (2, 3))
@@ -155,7 +155,10 @@ def test_the_core_runs_the_exported_package_end_to_end(exported, tmp_path):
 
     _, _, package = exported
     out = tmp_path / "run"
-    assert main(["run", str(package), "--out", str(out), "--quiet"]) == 0
+    # Assets not copied into the package: a run refuses them unless told they are the user's own.
+    assert main(["run", str(package), "--out", str(out), "--quiet"]) == 2
+    assert not (out / "render").exists()
+    assert main(["run", str(package), "--out", str(out), "--quiet", "--allow-external-assets"]) == 0
     report = json.loads((out / "report.json").read_text())
     ran = {s["name"]: s["ran"] for s in report["stages"]}
     assert ran["render"] and ran["harmonize"]

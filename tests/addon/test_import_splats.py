@@ -107,7 +107,7 @@ def test_truncated_ply_is_reported(blender, tmp_path):
 
 
 def test_missing_file_is_reported(blender, tmp_path):
-    with pytest.raises(RuntimeError, match="cannot open"):
+    with pytest.raises(RuntimeError, match="file not found"):
         blender.ops.symdrive.import_splats(filepath=str(tmp_path / "nope.ply"))
 
 
