@@ -16,7 +16,7 @@ from ..errors import InputError
 from ..gaussians import Gaussians
 from ..io.ply import read_splats
 from ..traffic.assets import load_asset
-from .mesh_to_splats import mesh_to_splats, read_obj
+from .mesh_to_splats import mesh_to_splats, read_mesh
 
 # Half turn about Z: (x, y, z) -> (-x, -y, z); quaternion (w, x, y, z) = (0, 0, 0, 1).
 HALF_TURN_Z = np.array([0.0, 0.0, 0.0, 1.0])
@@ -60,7 +60,7 @@ def load_vehicle_asset(folder, *, flip: bool = False, from_mesh: bool = False, n
     if info.splats is not None and not from_mesh:
         g, source = read_splats(info.splats, drop_invalid=True), info.splats
     else:
-        g, source = mesh_to_splats(read_obj(info.mesh), n_samples, seed=seed), info.mesh
+        g, source = mesh_to_splats(read_mesh(info.mesh), n_samples, seed=seed), info.mesh
     if len(g) == 0:
         raise InputError(source, "asset has no Gaussians")
     return VehicleAsset(folder.name, flip_forward(g) if flip else g, info.wlh, Path(source))
@@ -72,7 +72,7 @@ def actor_gaussians(manifest, actor, *, flip: bool = False, from_mesh: bool = Fa
     if from_mesh or actor.splats is None:
         if actor.mesh is None:
             raise InputError(manifest.path or manifest.root, f"actor {actor.id!r} has no mesh to sample", "assets.mesh")
-        g = mesh_to_splats(read_obj(manifest.resolve(actor.mesh)), n_samples, seed=seed)
+        g = mesh_to_splats(read_mesh(manifest.resolve(actor.mesh)), n_samples, seed=seed)
     else:
         g = read_splats(manifest.resolve(actor.splats), drop_invalid=True)
     return flip_forward(g) if flip else g

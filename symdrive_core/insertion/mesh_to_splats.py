@@ -1,15 +1,27 @@
-"""Mesh -> Gaussians by area-weighted surface sampling (numpy only).
+"""Mesh -> Gaussians by area-weighted surface sampling.
 
-A 3DRealCar asset may ship only a mesh. Each surface sample becomes a flat Gaussian lying in
-the face (thin along its normal) whose radius follows the sample spacing, coloured from the
-texture (``map_Kd`` at the interpolated UV), else the vertex colours, else the material ``Kd``.
-OBJ ``Kd`` is linear albedo, shown through the sRGB curve as a studio-lit capture would be;
-textures and vertex colours are taken as already display-encoded.
+A 3DRealCar asset may ship only a mesh, and a car imported into Blender may be any mesh. Each
+surface sample becomes a flat Gaussian lying in the face (thin along its normal) whose radius
+follows the sample spacing, coloured from the surface's base colour.
+
+:func:`read_mesh` reads any mesh file: OBJ with the project's own parser (:func:`read_obj`, so
+the shipped assets sample exactly as before), and glTF/GLB, PLY, STL, OFF (and an OBJ that
+parser cannot read) with trimesh, scenes flattened with their node transforms. glTF is +Y up:
+it is turned to the vehicle frame's +Z up exactly as Blender's glTF importer does,
+``(x, y, z) -> (x, -z, y)``; other formats are taken as Z up.
+
+Colour, for an OBJ read by :func:`read_obj`: the texture (``map_Kd`` at the interpolated UV),
+else the vertex colours, else the material ``Kd``. OBJ ``Kd`` is linear albedo, shown through
+the sRGB curve as a studio-lit capture would be; textures and vertex colours are taken as
+already display-encoded. For a mesh read with trimesh, the glTF rule: base colour factor x
+texture at UV x vertex colour, multiplied in linear light (glTF factors and vertex colours are
+linear, textures sRGB; PLY vertex colours are taken as display-encoded, OBJ ``Kd`` as linear).
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,12 +42,19 @@ class TriMesh:
     uvs: np.ndarray | None = None  # [U, 2]
     tri_uvs: np.ndarray | None = None  # [T, 3] uv indices (-1 where the face has none)
     tri_material: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # [T], -1 = none
-    materials: list[dict] = field(default_factory=list)  # {"name", "kd" (linear), "texture" [H,W,3] | None}
+    # {"name", "kd" (linear), "texture" [H,W,3] | None}; trimesh-read meshes add "multiply": True,
+    # "vertex_colored" and "vertex_linear" (the glTF rule, see the module docstring)
+    materials: list[dict] = field(default_factory=list)
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
 
 
 def _read_mtl(path: Path) -> dict[str, dict]:
@@ -72,6 +91,8 @@ def read_obj(path: str | os.PathLike) -> TriMesh:
             continue
         try:
             if parts[0] == "v":
+                if len(parts) < 4:
+                    raise ValueError("a vertex needs x, y and z")
                 verts.append([float(v) for v in parts[1:4]])
                 colors.append([float(v) for v in parts[4:7]] if len(parts) >= 7 else None)
             elif parts[0] == "vt":
@@ -108,6 +129,156 @@ def read_obj(path: str | os.PathLike) -> TriMesh:
                    np.clip(np.asarray(colors, dtype=np.float64), 0, 1) if has_colors else None,
                    np.asarray(uvs, dtype=np.float64) if uvs else None,
                    np.asarray(tri_uvs, dtype=np.int64), np.asarray(tri_mat, dtype=np.int64), materials)
+
+
+# glTF +Y up -> vehicle frame +Z up, as Blender's glTF importer turns it: (x, y, z) -> (x, -z, y).
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+# Formats trimesh reads with numpy (and Pillow, for textures) alone.
+TRIMESH_TYPES = {".glb": "glb", ".gltf": "gltf", ".ply": "ply", ".stl": "stl", ".off": "off", ".obj": "obj"}
+NOT_READ = {".fbx": "FBX", ".usd": "USD", ".usda": "USD", ".usdc": "USD", ".usdz": "USD", ".blend": "Blender",
+            ".dae": "COLLADA", ".3ds": "3DS", ".abc": "Alembic", ".x3d": "X3D"}
+
+
+def _sniff_type(path: Path) -> str | None:
+    """File type from the first bytes where they say (a GLB or PLY under another name), else the suffix."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:
+        raise InputError(path, f"cannot read: {exc.strerror or exc}") from None
+    if head == b"glTF":
+        return "glb"
+    if head[:3] == b"ply":
+        return "ply"
+    return TRIMESH_TYPES.get(path.suffix.lower())
+
+
+def _texture_array(image) -> np.ndarray | None:
+    """A PIL image (what trimesh loads textures as) -> float32 [H, W, 3] in [0, 1]."""
+    if image is None:
+        return None
+    try:
+        return np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
+    except Exception:  # noqa: BLE001 - a texture that does not decode leaves the base colour factor
+        return None
+
+
+def _part_colour(g, y_up: bool):
+    """(material dict, per-vertex uv or None, per-vertex colour or None) of one trimesh geometry."""
+    visual = getattr(g, "visual", None)
+    kind = getattr(visual, "kind", None)
+    material = {"name": "", "kd": srgb_to_linear(DEFAULT_COLOR), "texture": None, "multiply": True,
+                "vertex_colored": False, "vertex_linear": y_up}
+    uv = colors = None
+    if kind == "texture":
+        mat = visual.material
+        factor, tex = None, None
+        if hasattr(mat, "baseColorFactor") or hasattr(mat, "baseColorTexture"):  # PBR (glTF)
+            factor = getattr(mat, "baseColorFactor", None)
+            tex = _texture_array(getattr(mat, "baseColorTexture", None))
+            material["kd"] = np.ones(3) if factor is None else np.asarray(factor, np.float64)[:3] / 255.0
+        else:  # simple material (OBJ/MTL): Kd is linear albedo; a texture replaces it, as in read_obj
+            tex = _texture_array(getattr(mat, "image", None))
+            diffuse = getattr(mat, "diffuse", None)
+            material["kd"] = (np.ones(3) if tex is not None or diffuse is None
+                              else np.asarray(diffuse, np.float64)[:3] / 255.0)
+        material["name"] = str(getattr(mat, "name", "") or "")
+        material["texture"] = tex
+        if tex is not None and visual.uv is not None and len(visual.uv) == len(g.vertices):
+            uv = np.asarray(visual.uv, dtype=np.float64)
+        vc = getattr(visual, "vertex_attributes", {}).get("color")
+        if vc is not None and len(vc) == len(g.vertices):
+            colors = np.asarray(vc, dtype=np.float64)[:, :3] / 255.0
+    elif kind == "vertex":
+        colors = np.asarray(visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+        material["kd"] = np.ones(3)
+    if colors is not None:
+        material["vertex_colored"] = True
+    return material, uv, colors
+
+
+def read_trimesh(path: str | os.PathLike, file_type: str | None = None) -> TriMesh:
+    """Any mesh trimesh reads (glTF/GLB, PLY, STL, OFF, OBJ), scenes flattened with their node
+    transforms, glTF turned from +Y up to +Z up."""
+    path = Path(path)
+    file_type = file_type or _sniff_type(path)
+    if file_type is None:
+        fmt = NOT_READ.get(path.suffix.lower())
+        hint = f"{fmt} is not read here; " if fmt else ""
+        raise InputError(path, f"unsupported mesh format {path.suffix or '(no suffix)'!r}: {hint}export the "
+                         "mesh as GLB (or OBJ, PLY)")
+    try:
+        import trimesh
+    except ImportError:
+        raise InputError(path, "reading this mesh needs trimesh (pip install trimesh)") from None
+    try:
+        with warnings.catch_warnings():  # trimesh's own deprecation notices are not the user's concern
+            warnings.simplefilter("ignore")
+            scene = trimesh.load(str(path), file_type=file_type, force="scene", process=False)
+        nodes = [(scene.graph[node][0], scene.geometry[scene.graph[node][1]]) for node in scene.graph.nodes_geometry]
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds; all mean "cannot read this file"
+        raise InputError(path, f"cannot read {file_type.upper()} mesh: {type(exc).__name__}: {exc}") from None
+    y_up = file_type in ("glb", "gltf")
+    verts, tris, uvs, tri_uvs, colors, tri_mat, materials = [], [], [], [], [], [], []
+    offset = 0
+    for transform, g in nodes:
+        faces = np.asarray(getattr(g, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+        if len(faces) == 0:
+            continue  # points, lines, empty nodes: no surface to sample
+        v = np.asarray(g.vertices, dtype=np.float64)
+        fc = None
+        if getattr(g.visual, "kind", None) == "face":  # face colours: one vertex per face corner
+            fc = np.repeat(np.asarray(g.visual.face_colors, dtype=np.float64)[:, :3] / 255.0, 3, axis=0)
+            v, faces = v[faces.ravel()], np.arange(3 * len(faces)).reshape(-1, 3)
+        T = np.asarray(transform, dtype=np.float64)
+        v = v @ T[:3, :3].T + T[:3, 3]
+        if y_up:
+            v = v @ Y_UP_TO_Z_UP.T
+        if fc is not None:
+            material, uv, vc = ({"name": "", "kd": np.ones(3), "texture": None, "multiply": True,
+                                 "vertex_colored": True, "vertex_linear": False}, None, fc)
+        else:
+            material, uv, vc = _part_colour(g, y_up)
+        verts.append(v)
+        tris.append(faces + offset)
+        uvs.append(uv if uv is not None else np.zeros((len(v), 2)))
+        tri_uvs.append(faces + offset if uv is not None else np.full_like(faces, -1))
+        colors.append(vc)
+        tri_mat.append(np.full(len(faces), len(materials), dtype=np.int64))
+        materials.append(material)
+        offset += len(v)
+    if not verts:
+        raise InputError(path, "mesh has no faces (points or lines only, or an empty scene)")
+    V = np.concatenate(verts)
+    if not np.isfinite(V).all():
+        raise InputError(path, "mesh has non-finite vertex coordinates")
+    any_colors = any(c is not None for c in colors)
+    vert_colors = (np.concatenate([c if c is not None else np.ones((len(v), 3)) for c, v in zip(colors, verts)])
+                   if any_colors else None)
+    any_uv = any(m["texture"] is not None for m in materials)
+    return TriMesh(V, np.concatenate(tris), vert_colors,
+                   np.concatenate(uvs) if any_uv else None,
+                   np.concatenate(tri_uvs) if any_uv else None, np.concatenate(tri_mat), materials)
+
+
+def read_mesh(path: str | os.PathLike) -> TriMesh:
+    """A mesh file of any format read here (see the module docstring), in the vehicle frame."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "mesh file not found")
+    file_type = _sniff_type(path)
+    if file_type == "obj":
+        try:
+            return read_obj(path)
+        except InputError as exc:
+            obj_error = exc
+        try:
+            return read_trimesh(path, "obj")
+        except InputError:
+            raise obj_error from None
+    return read_trimesh(path, file_type)
 
 
 def barycentric(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -147,12 +318,29 @@ def sample_colors(mesh: TriMesh, points: np.ndarray, tri: np.ndarray) -> np.ndar
             continue
         tex = info.get("texture")
         uv_idx = mesh.tri_uvs[tri[sel]] if mesh.tri_uvs is not None else None
+        if info.get("multiply"):
+            out[sel] = _multiplied_color(mesh, info, bary[sel], tri[sel], uv_idx)
+            continue
         if tex is not None and mesh.uvs is not None and uv_idx is not None and (uv_idx >= 0).all():
             uv = np.einsum("nk,nkc->nc", bary[sel], mesh.uvs[uv_idx])
             out[sel] = _sample_texture(tex, uv)
         elif mesh.vert_colors is None:
             out[sel] = linear_to_srgb(info["kd"])
     return np.clip(out, 0.0, 1.0)
+
+
+def _multiplied_color(mesh: TriMesh, info: dict, bary: np.ndarray, tri: np.ndarray,
+                      uv_idx: np.ndarray | None) -> np.ndarray:
+    """glTF base colour: factor x texture x vertex colour in linear light, display-encoded."""
+    lin = np.tile(np.asarray(info["kd"], dtype=np.float64), (len(tri), 1))
+    tex = info.get("texture")
+    if tex is not None and mesh.uvs is not None and uv_idx is not None and (uv_idx >= 0).all():
+        uv = np.einsum("nk,nkc->nc", bary, mesh.uvs[uv_idx])
+        lin *= srgb_to_linear(_sample_texture(tex, uv))
+    if info.get("vertex_colored") and mesh.vert_colors is not None:
+        vc = np.clip(np.einsum("nk,nkc->nc", bary, mesh.vert_colors[mesh.tris[tri]]), 0.0, 1.0)
+        lin *= vc if info.get("vertex_linear") else srgb_to_linear(vc)
+    return linear_to_srgb(lin)
 
 
 def mesh_to_splats(mesh: TriMesh, n: int = 12000, *, seed: int = 0, flatness: float = 0.1,

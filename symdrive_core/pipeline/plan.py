@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..io.ply import read_header, read_splats
-from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
+from ..scene import Manifest, ManifestError, box_corners_world, box_in_frustum, vehicle_local_box
 from .cache_key import inputs_key
 
 STAGES = ("reconstruct", "render", "cast_shadow", "restore", "refine", "harmonize", "finetune",
@@ -85,10 +86,47 @@ def sh_degree_of(path: Path) -> int:
     return round(np.sqrt(n_rest // 3 + 1)) - 1
 
 
+def check_renderable(manifest: Manifest) -> None:
+    """Every actor can be rendered: it names a readable splat PLY (what it renders from), or no
+    splats and a readable mesh (sampled into splats at render time). Otherwise the plan stops,
+    naming the actor and why (``ManifestError`` at ``actors[i].assets``: exit 2)."""
+    from ..insertion.mesh_to_splats import read_mesh
+
+    for i, a in enumerate(manifest.actors):
+        if a.splats:
+            path, what = manifest.resolve(a.splats), f"splat file {a.splats!r}"
+        elif a.mesh:
+            path, what = manifest.resolve(a.mesh), f"mesh {a.mesh!r}"
+        else:
+            path, what = None, "a splat PLY or a mesh"
+        if path is None:
+            reason = "it names neither a splat PLY nor a mesh"
+        elif not path.is_file():
+            reason = f"{what} not found"
+        else:
+            try:
+                if a.splats:
+                    if not any(el.name == "vertex" for el in read_header(path).elements):
+                        raise InputError(path, "no 'vertex' element: not a splat file")
+                else:
+                    read_mesh(path)
+                continue
+            except InputError as exc:
+                reason = f"{what} cannot be read ({exc})"
+        raise ManifestError(manifest.path or manifest.root, f"actor {a.id!r} cannot be rendered: {reason}",
+                            f"actors[{i}].assets")
+
+
 def actor_local_box(manifest: Manifest, actor) -> tuple[np.ndarray, np.ndarray]:
-    """Local bounds of an actor: its ``wlh`` box, else its splats' extent (3 sigma padded)."""
+    """Local bounds of an actor: its ``wlh`` box, else its splats' extent (3 sigma padded), else
+    its mesh's bounds."""
     if actor.wlh is not None:
         return vehicle_local_box(actor.wlh)
+    if not actor.splats:
+        from ..insertion.mesh_to_splats import read_mesh
+
+        verts = read_mesh(manifest.resolve(actor.mesh)).verts
+        return verts.min(axis=0), verts.max(axis=0)
     g = read_splats(manifest.resolve(actor.splats))
     pad = 3.0 * g.scales.max(axis=1, initial=0.0)[:, None]
     return (g.means - pad).min(axis=0), (g.means + pad).max(axis=0)
@@ -122,7 +160,7 @@ def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
     from ..insertion.shadow import sun_above_horizon
 
     eff = manifest.effects
-    casters = {a.id for a in manifest.inserted_actors if a.splats and a.wlh is not None}
+    casters = {a.id for a in manifest.inserted_actors if a.wlh is not None}  # splats or mesh: all render
     frames = sorted({fi for cam in visible.values() for fi, ids in cam.items() if casters & set(ids)})
     if eff.sun_direction is None:
         return StageDecision("cast_shadow", False, "no sun in the scene")
@@ -143,6 +181,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     run's cache key (see cache_key.inputs_key; by default, that of these options alone)."""
     opt = options or PlanOptions()
     eff = manifest.effects
+    check_renderable(manifest)
     visible, culled = _visibility(manifest, opt.near)
     frames_all = list(range(len(manifest.frames)))
     stages: list[StageDecision] = []

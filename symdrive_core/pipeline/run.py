@@ -26,6 +26,8 @@ from .report import Report
 from .stages import Shared, StageOptions
 from .state import RunState
 
+ASSET_CACHE = "asset_cache"  # mesh-only actors' sampled splats, shared by the stages that render them
+
 
 @dataclass
 class RunContext:
@@ -62,7 +64,7 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: 
         if rgb_path.exists():
             continue
         if renderer is None:
-            renderer = SceneRenderer(manifest, device=device)
+            renderer = SceneRenderer(manifest, device=device, asset_cache=out.folder(ASSET_CACHE))
         frame = renderer.render(cam, fi, plan.visible[cam][fi])
         if casting.run and fi in casting.frames:
             casters = [a for a in plan.visible[cam][fi] if a in casting.actors]

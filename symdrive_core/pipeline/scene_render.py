@@ -1,19 +1,65 @@
 """Render a scene package's frames: background plus every visible actor at its pose.
 
 Loads each asset once (as activated tensors) and reuses it for every frame; actors the plan
-culled for a frame are never handed to the rasterizer.
+culled for a frame are never handed to the rasterizer. An actor renders from its splat PLY when
+it names one, else from its mesh, sampled into splats (:func:`actor_splats`) and, given a cache
+folder, written there once so later runs and stages read the same splats back.
 """
 
 from __future__ import annotations
 
+import hashlib
+import re
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from .. import conventions
+from ..errors import InputError
+from ..gaussians import Gaussians
 from ..io.ply import read_splats
 from ..scene import Manifest
+
+MESH_SAMPLES = 12000  # splats per mesh-only actor, as insertion.assets samples a mesh asset
+MESH_SEED = 0
+MESH_CONVERSION = "mesh_to_splats/1"  # part of the cache key: change it when the conversion changes
+
+
+def mesh_cache_path(cache_dir: Path, actor_id: str, mesh_path: Path, n_samples: int, seed: int) -> Path:
+    """Where an actor's mesh-sampled splats are cached: keyed by the mesh file's bytes and the sampling."""
+    h = hashlib.sha256(f"{MESH_CONVERSION}:{n_samples}:{seed}:".encode())
+    with open(mesh_path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", actor_id)
+    return Path(cache_dir) / "mesh_splats" / f"{safe}.{h.hexdigest()[:16]}.ply"
+
+
+def actor_splats(manifest: Manifest, actor, cache_dir: Path | None = None, *, n_samples: int = MESH_SAMPLES,
+                 seed: int = MESH_SEED) -> Gaussians:
+    """An actor's Gaussians in its own frame: its splat PLY, else its mesh sampled into splats
+    (read back from ``cache_dir`` when an earlier call wrote them there)."""
+    from ..insertion.mesh_to_splats import mesh_to_splats, read_mesh
+    from ..io.ply import write_splats
+
+    if actor.splats:
+        return read_splats(manifest.resolve(actor.splats))
+    if not actor.mesh:
+        raise InputError(manifest.path or manifest.root, f"actor {actor.id!r} has neither splats nor a mesh",
+                         "actors.assets")
+    mesh_path = manifest.resolve(actor.mesh)
+    cached = None
+    if cache_dir is not None and mesh_path.is_file():
+        cached = mesh_cache_path(cache_dir, actor.id, mesh_path, n_samples, seed)
+        if cached.is_file():
+            return read_splats(cached)
+    g = mesh_to_splats(read_mesh(mesh_path), n_samples, seed=seed)
+    if cached is not None:
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        write_splats(cached, g)
+    return g
 
 
 @dataclass
@@ -27,7 +73,10 @@ class FrameRender:
 
 class SceneRenderer:
     def __init__(self, manifest: Manifest, *, device: str = "cpu", background_color=(0.0, 0.0, 0.0),
-                 antialiased: bool = False, background_gaussians=None, actor_gaussians: dict | None = None):
+                 antialiased: bool = False, background_gaussians=None, actor_gaussians: dict | None = None,
+                 asset_cache: Path | None = None):
+        """``asset_cache``: folder for mesh-only actors' sampled splats (for ``symdrive run``,
+        ``<out>/insertion_assets``); without it they are sampled in memory."""
         from ..splat.tensors import GaussianTensors
 
         self.manifest = manifest
@@ -42,8 +91,8 @@ class SceneRenderer:
         self.sources = {}  # inserted actor id -> Gaussians as read (what its cast shadow is computed from)
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
-            if g is None and a.splats:
-                g = read_splats(manifest.resolve(a.splats))
+            if g is None and (a.splats or a.mesh):
+                g = actor_splats(manifest, a, asset_cache)
             if g is not None:
                 if a.kind == "inserted" and not isinstance(g, GaussianTensors):
                     self.sources[a.id] = g

@@ -207,9 +207,11 @@ def finetune_stage(ctx) -> dict:
     from ..insertion.evaluate import InsertionConfig, finetune_sample, insert_frame
     from ..insertion.placements import camera_view
     from ..io.images import read_image
-    from ..io.ply import read_splats, write_splats
+    from ..io.ply import write_splats
     from ..optim.finetune import FinetuneConfig, finetune_colors
     from ..splat.tensors import GaussianTensors
+    from .run import ASSET_CACHE
+    from .scene_render import actor_splats
 
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))
     bg = GaussianTensors.from_gaussians(background(ctx))
@@ -220,7 +222,7 @@ def finetune_stage(ctx) -> dict:
             written.append(aid)
             continue
         actor = ctx.manifest.actor(aid)
-        vehicle = read_splats(ctx.manifest.resolve(actor.splats))
+        vehicle = actor_splats(ctx.manifest, actor, ctx.tree.folder(ASSET_CACHE))
         samples = []
         for cam in ctx.manifest.cameras:
             for fi in ctx.plan.stage("harmonize").frames:

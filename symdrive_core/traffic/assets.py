@@ -1,21 +1,23 @@
 """The pool of vehicle assets traffic draws from: 3DRealCar-layout folders with ``wlh.json``.
 
-A folder holds ``wlh.json`` (``{"wlh": [w, l, h], "splats": "splats.ply", "mesh": "mesh.obj"}``,
-the file names optional) and the splat PLY and/or mesh it names. Each SUMO vehicle type is one
-asset, so the simulated vehicle has exactly the asset's length and width.
+A folder holds ``wlh.json`` (read by :mod:`symdrive_core.insertion.wlh`:
+``{"wlh": [w, l, h], "splats": "splats.ply", "mesh": "mesh.obj"}``, the file names optional) and
+the splat PLY and/or mesh it names. Each SUMO vehicle type is one asset, so the simulated vehicle
+has exactly the asset's length and width.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..insertion.wlh import read_wlh_info
 
-DEFAULT_FILES = {"splats": "splats.ply", "mesh": "mesh.obj"}
+# File names looked for when ``wlh.json`` names none (the first that exists is taken).
+DEFAULT_FILES = {"splats": ("splats.ply",), "mesh": ("mesh.obj", "mesh.glb", "mesh.gltf", "mesh.ply")}
 
 
 @dataclass(frozen=True)
@@ -32,24 +34,14 @@ class Asset:
 
 
 def load_asset(folder: Path, name: str) -> Asset:
-    path = folder / "wlh.json"
-    try:
-        info = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(path, f"cannot read: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(path, f"not valid JSON: {exc.msg}") from None
-    wlh = np.asarray(info.get("wlh") if isinstance(info, dict) else None, dtype=object)
-    if wlh.shape != (3,) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
-                                    for v in wlh):
-        raise InputError(path, "expected three positive sizes in metres", "wlh")
+    wlh, info = read_wlh_info(folder / "wlh.json")
     files = {}
-    for key, default in DEFAULT_FILES.items():
-        rel = info.get(key, default)
-        files[key] = folder / rel if isinstance(rel, str) and (folder / rel).exists() else None
+    for key, defaults in DEFAULT_FILES.items():
+        names = [info[key]] if key in info else defaults
+        files[key] = next((folder / n for n in names if isinstance(n, str) and (folder / n).exists()), None)
     if files["splats"] is None and files["mesh"] is None:
         raise InputError(folder, "asset folder has neither a splat PLY nor a mesh")
-    return Asset(name, folder.resolve(), wlh.astype(np.float64), files["splats"], files["mesh"])
+    return Asset(name, folder.resolve(), np.asarray(wlh, dtype=np.float64), files["splats"], files["mesh"])
 
 
 def asset_pool(folders: list[Path]) -> list[Asset]:
