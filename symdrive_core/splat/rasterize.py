@@ -191,6 +191,9 @@ def _rasterize_gsplat(means, quats, scales, opacities, colors, viewmat, K, width
     return rgb, alpha, info
 
 
+LOW_PRECISION = (torch.float16, torch.bfloat16)
+
+
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int, *,
               background=None, sh_degree: int | None = None, near: float = 0.01, far: float = 1e10,
               eps2d: float = 0.3, antialiased: bool = False, render_depth: bool = False,
@@ -215,6 +218,16 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
     if width <= 0 or height <= 0:
         raise ValueError(f"image size must be positive, got {width}x{height}")
     width, height = int(width), int(height)
+    low = next((t.dtype for t in (means, quats, scales, opacities, colors, viewmat, K)
+                if torch.is_tensor(t) and t.dtype in LOW_PRECISION), None)
+    if low is not None:  # rendered in float32, the kernels' narrowest type, and returned as given
+        up = [t.float() if torch.is_tensor(t) and t.is_floating_point() else t
+              for t in (means, quats, scales, opacities, colors, viewmat, K)]
+        rgb, alpha, info = rasterize(*up, width, height, background=background, sh_degree=sh_degree, near=near,
+                                     far=far, eps2d=eps2d, antialiased=antialiased, render_depth=render_depth,
+                                     alpha_threshold=alpha_threshold, extent=extent, backend=backend,
+                                     groups=groups, n_groups=n_groups)
+        return rgb.to(low), alpha.to(low), info
     n = means.shape[0]
     device = means.device
     backend = resolve_backend(backend, device)

@@ -221,3 +221,16 @@ def test_far_from_origin_matches_origin():
     assert float(a[1].max()) > 0.5
     torch.testing.assert_close(a[0], b[0], atol=1e-4, rtol=0)
     torch.testing.assert_close(a[3][0].grad, b[3][0].grad, atol=1e-3 * float(a[3][0].grad.abs().max()), rtol=0)
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_half_precision_inputs_render_as_float32_and_come_back_in_their_type(dtype):
+    """The kernels have float32 and float64 paths; half-precision tensors (as a mixed-precision
+    caller holds them) are rendered in float32, with gradients, instead of failing."""
+    ref = scene(40)
+    rgb32, alpha32, _, _ = check(*ref)
+    rgb, alpha, _, ps = check(*(t.to(dtype) for t in ref), V=torch.eye(4, dtype=dtype),
+                              K=K_from_fov(W, H, 60.0, torch.float32).to(dtype))
+    assert rgb.dtype == dtype and alpha.dtype == dtype and all(p.grad.dtype == dtype for p in ps)
+    tol = 2e-2 if dtype == torch.bfloat16 else 5e-3
+    assert float((rgb.detach().float() - rgb32.detach()).abs().mean()) < tol
