@@ -145,3 +145,57 @@ def test_rotated_parts_scale_in_the_actor_frame(blender, tmp_path):
     blender.context.view_layer.update()
     assert blender.ops.symdrive.fit_vehicle_size(w=2.0, l=3.0, h=1.0) == {"FINISHED"}
     np.testing.assert_allclose(root.symdrive.wlh, (2.0, 3.0, 1.0), atol=1e-5)
+
+
+def _glb_box(path):
+    """(min, max) of the POSITION accessors of a GLB, read from its JSON chunk."""
+    import struct
+
+    data = path.read_bytes()
+    assert data[:4] == b"glTF"
+    length, kind = struct.unpack_from("<II", data, 12)
+    assert kind == 0x4E4F534A  # JSON
+    gltf = json.loads(data[20 : 20 + length])
+    used = [p["attributes"]["POSITION"] for m in gltf["meshes"] for p in m["primitives"]]
+    lo = np.min([gltf["accessors"][i]["min"] for i in used], axis=0)
+    hi = np.max([gltf["accessors"][i]["max"] for i in used], axis=0)
+    nodes = [n for n in gltf["nodes"] if "mesh" in n]
+    return lo, hi, nodes
+
+
+def test_mesh_only_actor_is_exported_as_a_glb_in_its_own_frame(blender, tmp_path):
+    from symdrive_core.scene import check_files, load_manifest
+    from tests.addon.scenes import add_camera
+
+    (tmp_path / "downloads").mkdir()
+    glb = write_glb_car(blender, tmp_path / "downloads" / "truck.glb")
+    scene = blender.context.scene
+    scene.frame_start, scene.frame_end = 1, 2
+    scene.render.resolution_x, scene.render.resolution_y = 32, 24
+    scene.cursor.location = (10.0, 1.0, 0.0)
+    blender.ops.symdrive.import_vehicle(filepath=str(glb), flip_forward=True)
+    root = blender.context.active_object
+    blender.ops.symdrive.fit_vehicle_size(length=4.0)
+    root.rotation_euler.z = 0.7
+    scene.camera = add_camera(blender)
+    before = set(blender.data.objects)
+    out = tmp_path / "package"
+    assert blender.ops.symdrive.export_scene(directory=str(out)) == {"FINISHED"}
+    assert set(blender.data.objects) == before  # the stand-ins are gone
+    m = load_manifest(out)
+    check_files(m)
+    actor = m.actors[0]
+    assert actor.splats is None and actor.mesh == "assets/truck/mesh.glb"
+    lo, hi, nodes = _glb_box(out / actor.mesh)
+    for node in nodes:  # the frame is in the vertices, not in node transforms
+        M = np.eye(4)
+        if "matrix" in node:
+            M = np.array(node["matrix"]).reshape(4, 4).T
+        t, r, s = node.get("translation", [0, 0, 0]), node.get("rotation", [0, 0, 0, 1]), node.get("scale", [1, 1, 1])
+        np.testing.assert_allclose(M, np.eye(4), atol=1e-6)
+        np.testing.assert_allclose(t, 0, atol=1e-5)
+        np.testing.assert_allclose(np.abs(r), [0, 0, 0, 1], atol=1e-5)
+        np.testing.assert_allclose(s, 1, atol=1e-5)
+    half = np.array([WLH[1], WLH[0], WLH[2]]) / 2  # X forward, Y left, Z up, centred
+    np.testing.assert_allclose(lo, -half, atol=1e-4)
+    np.testing.assert_allclose(hi, half, atol=1e-4)
