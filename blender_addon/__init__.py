@@ -20,13 +20,14 @@ _unregister = None
 
 def _classes():
     from . import panels, prefs, props
-    from .operators import cameras, export_scene, import_splats, import_vehicle, trajectory
+    from .operators import cameras, export_scene, fit_size, import_splats, import_vehicle, trajectory
 
     return (
         *props.classes,
         prefs.SymDrivePreferences,
         import_splats.SYMDRIVE_OT_import_splats,
         import_vehicle.SYMDRIVE_OT_import_vehicle,
+        fit_size.SYMDRIVE_OT_fit_vehicle_size,
         trajectory.SYMDRIVE_OT_key_pose,
         trajectory.SYMDRIVE_OT_follow_curve,
         trajectory.SYMDRIVE_OT_import_package_poses,

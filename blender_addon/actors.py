@@ -8,15 +8,15 @@ backend can apply it to the asset PLY as is.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from pathlib import Path
 
 import bpy
 import numpy as np
-from mathutils import Matrix
+from mathutils import Matrix, Vector
 
+from . import core
 from .core import errors
 
 FLIP = Matrix.Rotation(math.pi, 4, "Z")
@@ -89,20 +89,9 @@ def geometry_points(root: bpy.types.Object) -> np.ndarray:
 
 
 def read_wlh_file(path: Path) -> np.ndarray:
-    """``wlh.json`` beside an asset: ``[w, l, h]`` or ``{"w": .., "l": .., "h": ..}`` in metres."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise errors.InputError(path, f"cannot read: {exc}") from None
-    if isinstance(data, dict):
-        data = [data.get(k, data.get(long)) for k, long in (("w", "width"), ("l", "length"), ("h", "height"))]
-    try:
-        wlh = np.array([float(v) for v in data], dtype=np.float64)
-    except (TypeError, ValueError):
-        raise errors.InputError(path, "expected [w, l, h] or {'w', 'l', 'h'} in metres", "wlh") from None
-    if wlh.shape != (3,) or not np.all(np.isfinite(wlh)) or np.any(wlh <= 0):
-        raise errors.InputError(path, "expected three positive sizes in metres", "wlh")
-    return wlh
+    """``wlh.json`` beside an asset, in metres, through the core's one reader (every form the
+    project writes or documents); vehicle import and Fit to Size both come here."""
+    return np.array(core.wlh.read_wlh(path), dtype=np.float64)
 
 
 def measure_and_ground(root: bpy.types.Object, wlh: np.ndarray | None = None) -> None:
@@ -142,3 +131,118 @@ def mask_geometry(root: bpy.types.Object) -> list[bpy.types.Object]:
 def splat_asset(root: bpy.types.Object) -> bpy.types.Object | None:
     """The splat cloud that is this actor's appearance in the backend (the first one found)."""
     return next((ob for ob in root.children_recursive if ob.symdrive.role == "SPLATS"), None)
+
+
+# A car, van or small truck: anything outside this is almost surely in the wrong unit or on its side.
+CAR_LENGTH_RANGE = (2.0, 8.0)
+
+
+def size_problem(wlh) -> str | None:
+    """Why a vehicle of size ``(w, l, h)`` is not car-sized, or None when it is."""
+    w, l, h = (float(v) for v in wlh)
+    lo, hi = CAR_LENGTH_RANGE
+    if not lo <= l <= hi:
+        return f"{l:.2f} m long (a vehicle is {lo:g} to {hi:g} m): wrong unit or scale?"
+    if h > l:
+        return f"{h:.2f} m high but {l:.2f} m long: wrong up axis?"
+    return None
+
+
+def asset_folder(root: bpy.types.Object) -> Path | None:
+    """Folder of the actor's mesh file (or splat PLY): where its wlh.json would be."""
+    s = root.symdrive
+    if s.mesh_path:
+        return Path(bpy.path.abspath(s.mesh_path)).parent
+    splats = splat_asset(root)
+    if splats is not None and splats.symdrive.ply_path:
+        return Path(bpy.path.abspath(splats.symdrive.ply_path)).parent
+    return None
+
+
+def recentre(root: bpy.types.Object) -> None:
+    """Move the actor's parts so that their box is centred on the actor origin (mesh-only actors)."""
+    bpy.context.view_layer.update()
+    pts = geometry_points(root)
+    if not len(pts):
+        return
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    shift = Matrix.Translation(Vector(-centre))
+    for child in root.children:
+        child.matrix_basis = shift @ child.matrix_basis
+
+
+def shift_height(root: bpy.types.Object, dz: float) -> None:
+    """Raise the actor by ``dz``: its location, and every key of an animated location Z."""
+    from . import compat
+
+    keyed = [
+        fc for fc in compat.object_fcurves(root) if fc.data_path == "location" and fc.array_index == 2
+    ]
+    for fc in keyed:
+        for k in fc.keyframe_points:
+            k.co.y += dz
+            k.handle_left.y += dz
+            k.handle_right.y += dz
+        fc.update()
+    root.location.z += dz
+
+
+def fit_size(root: bpy.types.Object, target) -> np.ndarray:
+    """Scale the actor's mesh data (never the empty) to ``target``.
+
+    ``target`` is a length (uniform scale) or ``(w, l, h)`` (each axis of the actor frame
+    scaled on its own). The geometry ends centred on the actor origin with its underside on the
+    same ground as before. Returns the new ``(w, l, h)``. Actors with a splat cloud are refused:
+    the backend renders the PLY as it is on disk.
+    """
+    if splat_asset(root) is not None:
+        raise errors.InputError(
+            root.symdrive.actor_id,
+            "has a splat cloud: its size is that of the PLY on disk (scale the PLY, then re-import)",
+            "splats",
+        )
+    bpy.context.view_layer.update()
+    pts = geometry_points(root)
+    if not len(pts):
+        raise errors.InputError(root.symdrive.actor_id, "has no mesh geometry to fit", "mesh")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    size = hi - lo  # actor frame: x = length, y = width, z = height
+    if np.any(size <= 1e-9):
+        raise errors.InputError(root.symdrive.actor_id, "geometry is flat: cannot fit a size", "mesh")
+    target = np.atleast_1d(np.asarray(target, dtype=np.float64))
+    if target.shape == (1,):
+        if not target[0] > 0:
+            raise errors.InputError(root.symdrive.actor_id, "length must be positive", "length")
+        factors = np.full(3, target[0] / size[0])
+    elif target.shape == (3,):
+        if not np.all(target > 0):
+            raise errors.InputError(root.symdrive.actor_id, "w, l, h must all be positive", "wlh")
+        w, l, h = target
+        factors = np.array([l, w, h]) / size
+    else:
+        raise ValueError(f"target must be a length or (w, l, h), got {target!r}")
+    centre = 0.5 * (lo + hi)
+    A = Matrix.Diagonal(Vector((*factors, 1.0)))
+    A = Matrix.Translation(Vector(-factors * centre)) @ A  # scaled, then centred on the origin
+    to_root = root.matrix_world.inverted()
+    done = set()
+    for ob in root.children_recursive:
+        if ob.type != "MESH":
+            continue
+        if ob.data.users > 1:  # shared data would be scaled once per user
+            ob.data = ob.data.copy()
+        M = to_root @ ob.matrix_world  # object -> actor frame
+        if ob.data.name in done:
+            continue
+        ob.data.transform(M.inverted() @ A @ M)
+        ob.data.update()
+        done.add(ob.data.name)
+    old_offset = root.symdrive.ground_offset
+    bpy.context.view_layer.update()
+    pts = geometry_points(root)
+    new_size = pts.max(axis=0) - pts.min(axis=0)
+    s = root.symdrive
+    s.ground_offset = float(-pts.min(axis=0)[2])
+    s.wlh = [float(new_size[1]), float(new_size[0]), float(new_size[2])]
+    shift_height(root, s.ground_offset - old_offset)
+    return np.array(s.wlh)

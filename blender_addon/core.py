@@ -32,6 +32,7 @@ ply = importlib.import_module(f"{CORE}.io.ply")
 atomic = importlib.import_module(f"{CORE}.io.atomic")
 scene = importlib.import_module(f"{CORE}.scene")
 poses = importlib.import_module(f"{CORE}.scene.poses")
+wlh = importlib.import_module(f"{CORE}.insertion.wlh")
 
 
 def images():

@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from . import actors, camera_math, core, masks, reference_frame
+from . import actors, camera_math, core, masks, quiet, reference_frame
 from .core import atomic, conventions, errors
 from .core import scene as scene_pkg
 
@@ -42,6 +42,7 @@ class _Actor:
     root: bpy.types.Object
     splats: str | None  # absolute paths on this machine
     mesh: str | None
+    mesh_in_package: str | None = None  # package-relative GLB written by the export (mesh-only actors)
 
 
 def _file_label(name: str) -> str:
@@ -218,6 +219,9 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                     if progress:
                         progress(i + 1, len(frame_numbers))
             asset = _AssetPaths(out, work, options.copy_assets)
+            for a in actor_list:
+                if a.splats is None:  # mesh-only: the backend gets the geometry as Blender shows it
+                    a.mesh_in_package = write_actor_glb(a.root, work)
             inserted = any(a.root.symdrive.kind == "inserted" for a in actor_list)
             sun = _sun_direction(scene, bg_inv)
             fps = scene.render.fps / scene.render.fps_base
@@ -257,7 +261,7 @@ def _manifest_actor(a: _Actor, poses, asset: _AssetPaths) -> scene_pkg.Actor:
         id=s.actor_id,
         kind=s.kind,
         splats=asset(a.splats),
-        mesh=asset(a.mesh),
+        mesh=a.mesh_in_package or asset(a.mesh),
         poses=poses,
         wlh=wlh,
         instance_id=s.instance_id,
@@ -295,3 +299,70 @@ def _write_masks(work: Path, renderer, depsgraph, cameras, present, index, mask_
                     cam.name, index, root.symdrive.actor_id, f"{stem}_amodal.png", f"{stem}_visible.png"
                 )
             )
+
+
+def write_actor_glb(root: bpy.types.Object, work: Path) -> str:
+    """Write a mesh-only actor's geometry as ``assets/<actor id>/mesh.glb`` and return that path.
+
+    Blender's own glTF exporter writes the meshes (modifiers applied, materials and their base
+    colour included) in the actor's asset frame: X forward, Z up, origin at the actor's origin
+    (its box centre). The coordinates are stored as they are (no conversion to glTF's Y-up), the
+    same frame as a 3DRealCar OBJ, with identity node transforms. Temporary copies of the evaluated
+    meshes carry the transform, so nothing in the artist's scene changes.
+    """
+    rel = f"assets/{_file_label(root.symdrive.actor_id)}/mesh.glb"
+    target = work / rel
+    target.parent.mkdir(parents=True, exist_ok=True)
+    context = bpy.context
+    depsgraph = context.evaluated_depsgraph_get()
+    to_asset = actors.asset_world_matrix(root.evaluated_get(depsgraph)).inverted()
+    parts = [ob for ob in actors.mask_geometry(root) if ob.type == "MESH"]
+    if not parts:
+        raise errors.InputError(root.name, "mesh-only actor has no mesh to export", "assets")
+    selected = list(context.selected_objects)
+    active = context.view_layer.objects.active
+    collection = bpy.data.collections.new("SymDrive GLB export")
+    context.scene.collection.children.link(collection)
+    proxies = []
+    try:
+        for src in parts:  # evaluated meshes (modifiers applied), their vertices in the asset frame
+            ev = src.evaluated_get(depsgraph)
+            mesh = bpy.data.meshes.new_from_object(ev, preserve_all_data_layers=True, depsgraph=depsgraph)
+            mesh.transform(to_asset @ ev.matrix_world)
+            proxy = bpy.data.objects.new(src.name, mesh)
+            collection.objects.link(proxy)
+            proxies.append(proxy)
+        for ob in selected:
+            ob.select_set(False)
+        for proxy in proxies:
+            proxy.select_set(True)
+        context.view_layer.objects.active = proxies[0]
+        addon_utils_enable("io_scene_gltf2")
+        with quiet.quiet_output():
+            result = bpy.ops.export_scene.gltf(
+                filepath=str(target),
+                export_format="GLB",
+                use_selection=True,
+                export_yup=True,  # glTF's own +Y up, which the core's mesh reader turns back to Z up
+                export_apply=True,
+                export_animations=False,
+            )
+        if "FINISHED" not in result or not target.is_file():
+            raise errors.InputError(root.name, "Blender's glTF exporter wrote no file", "assets")
+    finally:
+        for proxy in proxies:
+            mesh = proxy.data
+            bpy.data.objects.remove(proxy, do_unlink=True)
+            bpy.data.meshes.remove(mesh)
+        bpy.data.collections.remove(collection)
+        for ob in selected:
+            if ob.name in context.view_layer.objects:
+                ob.select_set(True)
+        context.view_layer.objects.active = active
+    return rel
+
+
+def addon_utils_enable(module: str) -> None:
+    import addon_utils
+
+    addon_utils.enable(module, default_set=False)

@@ -1,11 +1,14 @@
-"""Exact per-actor masks rendered by Cycles through the object-index pass.
+"""Exact per-actor masks rendered by Cycles, the object index written as the pixel value.
 
 Masks are rendered in a temporary scene that holds only stand-ins of the actors' geometry and a
 camera, so nothing else in the artist's scene occludes them and none of its settings change.
 Each stand-in shares its source's data and modifiers but has no parent, animation or
 constraints: its world matrix is copied from the source after ``frame_set``, the same evaluated
 state the exported poses come from. One sample, a box filter of minimal width and an opaque
-override material make every pixel's id that of the surface under its centre.
+override material that emits each object's pass index make every pixel's value the id of the
+surface under its centre. The id travels in the Combined pass of a plain float EXR, which every
+Blender from 4.2 to 5.2 writes the same way (Blender 5.0 no longer writes extra passes such as
+the object index into the render's multilayer EXR).
 
 amodal mask: the actor rendered alone. visible mask: the actor's pixels with all present
 actors rendered together (other actors occlude it). The visible render is also the id map.
@@ -21,7 +24,7 @@ from typing import Self
 import bpy
 import numpy as np
 
-from . import actors
+from . import actors, compat, quiet
 
 NEAR, FAR = 0.01, 1.0e5  # the backend's near plane; far enough for any street
 
@@ -48,11 +51,12 @@ class MaskRenderer:
             self.source.render.pixel_aspect_y,
         )
         r.film_transparent, r.use_persistent_data = True, True
-        r.image_settings.file_format, r.image_settings.color_depth = "OPEN_EXR_MULTILAYER", "32"
-        layer = scene.view_layers[0]
-        layer.use_pass_object_index = True
-        self.material = bpy.data.materials.new("SymDrive mask override")
-        layer.material_override = self.material
+        r.use_compositing, r.use_sequencer = False, False
+        compat.set_float_exr(r.image_settings)
+        scene.view_settings.view_transform, scene.view_settings.look = "Standard", "None"
+        scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
+        self.material = index_material("SymDrive mask override")
+        scene.view_layers[0].material_override = self.material
 
         self.camera = bpy.data.objects.new(
             "SymDrive mask camera", bpy.data.cameras.new("SymDrive mask camera")
@@ -108,8 +112,9 @@ class MaskRenderer:
             layer.layer_collection.children[coll.name].exclude = root not in shown
         path = self._tmp / "ids.exr"
         self.scene.render.filepath = str(path)
-        bpy.ops.render.render(write_still=True, scene=self.scene.name)
-        return read_index_pass(path)
+        with quiet.quiet_output():
+            bpy.ops.render.render(write_still=True, scene=self.scene.name)
+        return read_index_image(path)
 
     def render(self, depsgraph, camera: bpy.types.Object, present: list[bpy.types.Object]):
         """(id map [H, W] int32 of visible instance ids, {root: amodal bool mask [H, W]})."""
@@ -121,14 +126,27 @@ class MaskRenderer:
         return ids, amodal
 
 
-def read_index_pass(path: Path) -> np.ndarray:
-    """The object-index channel of a multilayer EXR as integers [H, W]."""
+def index_material(name: str) -> bpy.types.Material:
+    """An opaque material emitting its object's pass index (the id) with no shading."""
+    mat = bpy.data.materials.new(name)
+    tree = compat.material_node_tree(mat)
+    nodes, links = tree.nodes, tree.links
+    nodes.clear()
+    info = nodes.new("ShaderNodeObjectInfo")
+    emit = nodes.new("ShaderNodeEmission")
+    out = nodes.new("ShaderNodeOutputMaterial")
+    emit.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    links.new(info.outputs["Object Index"], emit.inputs["Strength"])
+    links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def read_index_image(path: Path) -> np.ndarray:
+    """The ids of an index render (red channel of a float EXR) as integers [H, W]."""
     import OpenImageIO as oiio  # bundled with Blender
 
     buf = oiio.ImageBuf(str(path))
-    names = list(buf.spec().channelnames)
-    channel = next((i for i, n in enumerate(names) if n.split(".")[-2:-1] == ["IndexOB"]), None)
-    if channel is None:
-        raise RuntimeError(f"{path}: no object index pass among channels {names}")
+    if buf.has_error or buf.spec().nchannels < 1:
+        raise RuntimeError(f"{path}: cannot read the index render: {buf.geterror()}")
     pixels = np.asarray(buf.get_pixels(oiio.FLOAT))
-    return np.rint(pixels[:, :, channel]).astype(np.int32)
+    return np.rint(pixels[:, :, 0]).astype(np.int32)

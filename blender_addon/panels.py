@@ -50,6 +50,10 @@ class SYMDRIVE_PT_object(_Sidebar, bpy.types.Panel):
             layout.prop(s, "kind")
             layout.prop(s, "flip_forward")
             layout.prop(s, "wlh")
+            problem = actors.size_problem(s.wlh) if min(s.wlh) > 0 else None
+            if problem:
+                layout.label(text=f"Not car-sized: {problem}", icon="ERROR")
+            layout.operator("symdrive.fit_vehicle_size", icon="FULLSCREEN_ENTER")
             layout.label(text=f"Instance id {s.instance_id}, ground offset {s.ground_offset:.3f} m")
         elif ob.symdrive.role == "SPLATS":
             s = ob.symdrive

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import bpy
 
+from . import compat
+
 GROUP_NAME = "SymDrive Splat Display"
 MATERIAL_NAME = "SymDrive Splat"
 MODIFIER_NAME = "SymDrive display"
@@ -23,8 +25,8 @@ def splat_material() -> bpy.types.Material:
     if mat is not None:
         return mat
     mat = bpy.data.materials.new(MATERIAL_NAME)
-    mat.use_nodes = True
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tree = compat.material_node_tree(mat)
+    nodes, links = tree.nodes, tree.links
     nodes.clear()
     attr = nodes.new("ShaderNodeAttribute")
     attr.attribute_type = "GEOMETRY"
@@ -100,6 +102,6 @@ def add_display_modifier(obj: bpy.types.Object, size: float = 1.0) -> bpy.types.
     mod.node_group = display_group()
     for item in mod.node_group.interface.items_tree:
         if getattr(item, "in_out", None) == "INPUT" and item.name == "Size":
-            mod[item.identifier] = float(size)
+            compat.set_modifier_input(mod, item.identifier, float(size))
     obj.data.materials.append(splat_material())
     return mod

@@ -12,6 +12,12 @@ from .. import export
 from ..core import errors
 
 
+def _progress(wm, i: int, n: int) -> None:
+    """The progress bar, and one console line per frame (render status lines are silenced)."""
+    wm.progress_update(i / n)
+    print(f"SymDrive export: frame {i}/{n}", flush=True)
+
+
 class SYMDRIVE_OT_export_scene(bpy.types.Operator):
     """Export cameras, vehicle poses and masks of the frame range as a scene package"""
 
@@ -46,7 +52,7 @@ class SYMDRIVE_OT_export_scene(bpy.types.Operator):
         t0 = time.perf_counter()
         wm.progress_begin(0, 1)
         try:
-            manifest = export.export_scene(scene, options, progress=lambda i, n: wm.progress_update(i / n))
+            manifest = export.export_scene(scene, options, progress=lambda i, n: _progress(wm, i, n))
         except (errors.SymDriveError, ValueError, OSError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}

@@ -13,6 +13,11 @@ from .. import actors, mesh_import, prefs, splat_objects
 from ..core import errors
 from ..props import KINDS
 
+AXIS_ITEMS = [("AUTO", "Automatic", "+Y up and +Z forward for glTF; +Z up and +X forward otherwise")] + [
+    (key, key.replace("NEGATIVE_", "-"), f"The file's {key.replace('NEGATIVE_', '-')} axis")
+    for key in mesh_import.AXES
+]
+
 
 def build_vehicle(
     context,
@@ -22,7 +27,8 @@ def build_vehicle(
     actor_id: str = "",
     kind: str = "inserted",
     flip_forward: bool = False,
-    up_axis: str = "Z",
+    up_axis: str = "AUTO",
+    forward_axis: str = "AUTO",
     max_points: int = 0,
 ) -> bpy.types.Object:
     """Create the actor; on any error nothing is left behind and ``InputError`` is raised."""
@@ -60,7 +66,7 @@ def build_vehicle(
             created.append(ob)
             parts.append(ob)
         if mesh_file is not None:
-            new = mesh_import.import_mesh(mesh_file, up_axis)
+            new = mesh_import.import_mesh(mesh_file, up_axis, forward_axis)
             created += new
             for ob in new:
                 if ob.type == "MESH":
@@ -70,6 +76,8 @@ def build_vehicle(
             ob.parent = root
             ob.matrix_parent_inverse = Matrix.Identity(4)
         s.flip_forward = flip_forward  # re-seats the children
+        if not splat_files:  # a mesh-only actor's origin is its box centre (splats fix their own)
+            actors.recentre(root)
         actors.measure_and_ground(root, wlh)
     except BaseException:
         for ob in created:
@@ -98,9 +106,16 @@ class SYMDRIVE_OT_import_vehicle(bpy.types.Operator, ImportHelper):
         name="Flip forward", default=False, description="The asset faces -X: turn it 180 degrees about Z"
     )
     up_axis: EnumProperty(
-        name="Mesh up axis",
-        default="Z",
-        items=[("Z", "Z", "3DRealCar frame (Z up)"), ("Y", "Y", "Y-up OBJ/PLY exports")],
+        name="Up axis",
+        default="AUTO",
+        items=AXIS_ITEMS,
+        description="The file's axis that points up (Automatic: +Y for glTF, +Z otherwise)",
+    )
+    forward_axis: EnumProperty(
+        name="Forward axis",
+        default="AUTO",
+        items=AXIS_ITEMS,
+        description="The file's axis the vehicle's front points along (Automatic: +Z for glTF, +X otherwise)",
     )
 
     def execute(self, context):
@@ -114,6 +129,7 @@ class SYMDRIVE_OT_import_vehicle(bpy.types.Operator, ImportHelper):
                 kind=self.kind,
                 flip_forward=self.flip_forward,
                 up_axis=self.up_axis,
+                forward_axis=self.forward_axis,
                 max_points=prefs.default_max_points(),
             )
         except errors.SymDriveError as exc:
@@ -127,8 +143,14 @@ class SYMDRIVE_OT_import_vehicle(bpy.types.Operator, ImportHelper):
         root.select_set(True)
         context.view_layer.objects.active = root
         width, length, height = root.symdrive.wlh
-        self.report(
-            {"INFO"},
-            f"Actor {root.symdrive.actor_id!r}: {length:.2f} m long, {width:.2f} m wide, {height:.2f} m high",
-        )
+        summary = f"Actor {root.symdrive.actor_id!r}: {length:.2f} m long, {width:.2f} m wide, {height:.2f} m high"
+        problem = actors.size_problem(root.symdrive.wlh)
+        if problem:
+            self.report(
+                {"WARNING"},
+                f"{summary}. Not car-sized: {problem} Check the up and forward axes, "
+                "or use Fit to Size (sidebar > SymDrive > Selected)",
+            )
+        else:
+            self.report({"INFO"}, summary)
         return {"FINISHED"}

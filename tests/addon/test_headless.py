@@ -36,7 +36,11 @@ def test_headless_export_of_a_saved_blend(blender, tmp_path):
     out = tmp_path / "package"
     done = _run_blender(blend, "--out", str(out), "--frames", "2:4")
     assert done.returncode == 0, done.stderr[-2000:]
-    assert "frame 3/3" in done.stdout
+    log = done.stdout + done.stderr
+    assert [line for line in log.splitlines() if "frame" in line and "/3" in line] == [
+        f"export_scene.py: frame {i}/3" for i in (1, 2, 3)
+    ]  # one progress line per frame, and none of Cycles' per-sample status lines
+    assert "Sample" not in log and "Fra:" not in log and "Saved:" not in log, log[-2000:]
     m = load_manifest(out, allow_external=True)  # assets not copied: the user's own files, outside
     check_files(m)
     assert len(m.frames) == 3 and [a.id for a in m.actors] == ["car_a", "car_b"]

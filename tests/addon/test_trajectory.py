@@ -3,6 +3,7 @@ import math
 import numpy as np
 import pytest
 
+from blender_addon import compat
 from tests.addon.assets import write_car
 
 pytestmark = pytest.mark.blender
@@ -87,7 +88,7 @@ def test_open_curve_stops_at_its_end(blender, tmp_path):
     scene.frame_set(1)
     blender.ops.symdrive.follow_curve(curve="path", speed=5.0)
     root = blender.context.active_object
-    fcurve_frames = {int(k.co[0]) for fc in root.animation_data.action.fcurves for k in fc.keyframe_points}
+    fcurve_frames = {int(k.co[0]) for fc in compat.object_fcurves(root) for k in fc.keyframe_points}
     assert fcurve_frames == set(range(1, 22))  # 10 m at 0.5 m per frame
 
 
