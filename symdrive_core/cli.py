@@ -8,8 +8,10 @@ user's input print one line naming the file and field and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import os
 import sys
 
 from .errors import SymDriveError
@@ -27,6 +29,7 @@ COMMAND_MODULES = [
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="symdrive", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).add_commands(sub)
@@ -40,6 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     args.invocation = " ".join(["symdrive", *argv])  # recorded in outputs for reproduction
     try:
         return int(args.func(args) or 0)
+    except BrokenPipeError:  # `symdrive plan | head`: the reader left; nothing more to say
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # no flush error at exit either
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except SymDriveError as exc:
         print(f"symdrive {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -53,6 +60,37 @@ def add_external_assets_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-external-assets", action="store_true",
                    help="read asset files outside the package (absolute paths, '..', links leading out), as "
                         "an add-on export without --copy-assets needs; only for packages you trust")
+
+
+def device_arg(value: str) -> str:
+    """``--device``: a torch device this machine has (cpu, cuda, cuda:N), checked up front."""
+    if value == "cpu":
+        return value
+    import torch
+
+    try:
+        device = torch.device(value)
+    except (RuntimeError, ValueError):
+        raise argparse.ArgumentTypeError(f"{value!r} is not a torch device (cpu, cuda, cuda:N)") from None
+    if device.type == "cuda":
+        if not torch.cuda.is_available():
+            raise argparse.ArgumentTypeError(
+                f"{value!r}: CUDA is not available here (torch {torch.__version__}"
+                f"{', a CPU-only build' if torch.version.cuda is None else ', no GPU found'}); use --device cpu")
+        if device.index is not None and device.index >= torch.cuda.device_count():
+            raise argparse.ArgumentTypeError(f"{value!r}: this machine has {torch.cuda.device_count()} GPU(s)")
+    elif device.type != "cpu":
+        raise argparse.ArgumentTypeError(f"{value!r}: only cpu and cuda devices are supported")
+    return value
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("symdrive")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def print_json(obj) -> None:

@@ -6,7 +6,7 @@ FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are l
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from ..cli import add_external_assets_option, device_arg
 
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -18,7 +18,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("run", help="run a scene package's plan: render, restore, harmonize, ... (resumable)")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
-    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--no-refine", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
@@ -31,7 +31,7 @@ def add_commands(sub) -> None:
     p.add_argument("--executor", choices=["local", "ray"], default="local")
     p.add_argument("--address", help="Ray cluster address (default: start a local one)")
     p.add_argument("--frames-per-task", type=int, default=4)
-    p.add_argument("--device", default="cpu")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_external_assets_option(p)
     p.set_defaults(func=_batch)
