@@ -7,7 +7,10 @@ OUT    ?= out/demo
 
 .PHONY: demo test test-all test-addon-4.2 test-addon-5.2 bench addon clean
 
+# Python 3.11 to 3.13 (bpy wheels exist for 3.11 and 3.13; on 3.12 the add-on tests are skipped).
 $(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; v = sys.version_info[:2]; sys.exit(0 if (3, 11) <= v <= (3, 13) else \
+		"SymDrive needs Python 3.11, 3.12 or 3.13; $(PYTHON) is %d.%d: run make with PYTHON=python3.11" % v)'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip
 	# The CPU build, named exactly: an open `torch` requirement would pull a multi-GB CUDA build.
