@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
 import json
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -77,3 +80,24 @@ def make_package(tmp_path):
         return root / "manifest.json"
 
     return _make
+
+
+def _end_now(status: int) -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:
+            pass
+    os._exit(status)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """End the process as soon as Python has finished, when bpy was imported (by any test).
+
+    The bpy wheel can deadlock in one of its C++ static destructors at process exit (4.5.15:
+    ``GlobalState::~GlobalState`` waits on a condition variable its idle file-closing thread still
+    holds), after every test has run and the summary is printed: the run would never return.
+    The last atexit handler skips the C-level exit handlers and keeps pytest's exit status.
+    """
+    if "bpy" in sys.modules:
+        atexit.register(_end_now, int(exitstatus))
