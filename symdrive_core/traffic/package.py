@@ -64,14 +64,44 @@ def traffic_manifest(src: Manifest, road: Road, run: TrafficRun, assets: list[As
 def write_package(manifest: Manifest, workdir: Path) -> Path:
     """Validate and write ``manifest`` (plus SUMO's network and routes) as a whole, atomically."""
     out = manifest.root
-    text = json.dumps(manifest.to_json(), indent=1) + "\n"
     with atomic_directory(out) as tmp:
+        _bring_in_outside_files(manifest, tmp)
+        text = json.dumps(manifest.to_json(), indent=1) + "\n"
         (tmp / "manifest.json").write_text(text, encoding="utf-8")
         check_files(parse_manifest(json.loads(text), tmp / "manifest.json"))
         (tmp / "traffic").mkdir()
         for name in KEPT_SUMO_FILES:
             shutil.copy2(workdir / name, tmp / "traffic" / name)
     return out / "manifest.json"
+
+
+def _bring_in_outside_files(manifest: Manifest, tmp: Path) -> None:
+    """The files the new package names outside itself (the source package's images and
+    background, the asset pool's cars) are linked into ``tmp`` under ``assets/`` (copied across
+    file systems), so that it runs on its own and, as any package, reads nothing outside itself."""
+    root = manifest.root.resolve()
+    placed: dict[Path, str] = {}
+
+    def bring(rel: str | None) -> str | None:
+        if rel is None or (manifest.root / rel).resolve().is_relative_to(root):
+            return rel
+        src = (manifest.root / rel).resolve()
+        if src not in placed:
+            placed[src] = f"assets/{len(placed):04d}_{src.name}"
+            dst = tmp / placed[src]
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(src, dst)
+            except OSError:
+                shutil.copy2(src, dst)
+        return placed[src]
+
+    manifest.background_splats = bring(manifest.background_splats)
+    manifest.background_points = bring(manifest.background_points)
+    for cam in manifest.cameras:
+        cam.frames = [replace(cf, image=bring(cf.image), depth=bring(cf.depth)) for cf in cam.frames]
+    for a in manifest.actors:
+        a.splats, a.mesh = bring(a.splats), bring(a.mesh)
 
 
 def check_output_path(src: Manifest, out: Path) -> None:
