@@ -34,7 +34,12 @@ def run_episode(env, agent_cls, seed: int, *, video: str | Path | None = None, f
         if video is None and frames_out is None:
             return
         image = o.get("images", {}).get(cam)
-        size = inset or max(48, int(0.45 * (image.shape[0] if image is not None else 256)))
+        if inset:
+            size = inset
+        elif image is None:
+            size = 256
+        else:
+            size = max(4, min(int(0.45 * image.shape[0]), image.shape[0] - 4, image.shape[1] - 4))
         frames.append(compose(image, birds_eye(env, env.history[-1], size)))
 
     grab(obs)
