@@ -292,10 +292,11 @@ class SymDriveEnv(gym.Env):
         layers = [] if r.background is None else [Layer(r.background, None, None, 0)]
         by_id = {a.id: a for a in self.manifest.actors}
         for s in self.actors:
-            if s.id in r.actors:
-                layers.append(Layer(r.actors[s.id], torch.as_tensor(s.pose.R, dtype=torch.float32),
+            asset = s.asset or s.id
+            if asset in r.actors:
+                layers.append(Layer(r.actors[asset], torch.as_tensor(s.pose.R, dtype=torch.float32),
                                     torch.as_tensor(s.pose.translation, dtype=torch.float32),
-                                    by_id[s.id].instance_id if s.id in by_id else 0))
+                                    by_id[asset].instance_id if asset in by_id else 0))
         with torch.no_grad():
             out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
                                 torch.as_tensor(K, dtype=torch.float32), w, h, background=r.background_color)

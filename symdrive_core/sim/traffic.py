@@ -21,6 +21,7 @@ class ActorState:
     pose: Pose  # box centre and rotation in the world
     wlh: np.ndarray  # (width, length, height)
     velocity: np.ndarray  # [2] world m/s
+    asset: str | None = None  # the package actor whose splats it wears (None: its own id)
 
     @property
     def xy(self) -> np.ndarray:
