@@ -21,7 +21,6 @@ def add_commands(sub) -> None:
     p.add_argument("--vehicles", type=int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
     p.add_argument("--no-video", action="store_true")
-    p.add_argument("--restore", action="store_true", help="restore views off the recorded path online")
     add_external_assets_option(p)
     p.set_defaults(func=_sim)
 
@@ -44,7 +43,7 @@ def _sim(args) -> int:
     if args.dt is not None and not args.dt > 0:
         raise InputError("--dt", f"expected a positive number of seconds, got {args.dt}")
     cfg = SimConfig(dt=args.dt, time_limit_s=args.time_limit, image_size=size, render=not args.no_render,
-                    traffic=args.traffic, sumo_vehicles=args.vehicles, restore=args.restore)
+                    traffic=args.traffic, sumo_vehicles=args.vehicles)
     try:
         from .agents import load_agent
 

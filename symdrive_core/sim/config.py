@@ -45,8 +45,6 @@ class SimConfig:
     sumo_vehicles: int = 0  # SUMO traffic: vehicles spread over the road at the start
     sumo_speed: float = 13.89  # SUMO lane speed limit, m/s
     sumo_timeout_s: float = 300.0
-    # Online restoration of views off the recorded path (loads the restorer only when True).
-    restore: bool = False
     # Score thresholds (NAVSIM / nuPlan values; see scores.py).
     ttc_horizon_s: float = 1.0
     extra: dict = field(default_factory=dict)

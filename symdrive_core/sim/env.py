@@ -93,7 +93,6 @@ class SymDriveEnv(gym.Env):
 
         self.traffic = self._make_traffic()
         self._renderer = None
-        self._restorer = None
         limits = self.action_limits
         self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
                                        np.array([limits[0][1], limits[1][1]], dtype=np.float32))
@@ -301,10 +300,5 @@ class SymDriveEnv(gym.Env):
             out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
                                 torch.as_tensor(K, dtype=torch.float32), w, h, background=r.background_color)
         rgb = out["rgb"].detach().cpu().numpy()
-        if self.config.restore:
-            rgb = self._restore(camera, rgb)
         self.timing["render"] += time.perf_counter() - t0
         return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-
-    def _restore(self, camera: str, rgb: np.ndarray) -> np.ndarray:
-        raise NotImplementedError("restore=True is not available yet")

@@ -68,7 +68,8 @@ class SumoTraffic:
         ET.ElementTree(root).write(work / "routes.rou.xml")
         args = ["-n", net.path.name, "-r", "routes.rou.xml", "--step-length", f"{self.env.dt}",
                 "--seed", str(int(seed or 0)), "--collision.action", "none", "--time-to-teleport", "-1",
-                "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true"]
+                "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
+                "--eager-insert", "true"]
         self.conn = conn = stack.enter_context(traci_session(args, self.config.sumo_timeout_s, work))
         self._stack = stack
         self.offset = net.offset
@@ -91,12 +92,16 @@ class SumoTraffic:
                     slots.append((ed, ln, float(p)))
         n = min(self.config.sumo_vehicles, len(slots))
         self.types = {}
-        for k, i in enumerate(rng.choice(len(slots), size=n, replace=False) if n else []):
-            ed, ln, p = slots[i]
-            t = int(rng.integers(len(self.templates)))
+        chosen = rng.choice(len(slots), size=n, replace=False) if n else []
+        kinds = rng.integers(len(self.templates), size=n)
+        # Downstream first: each vehicle then enters behind one already there.
+        order = sorted(range(n), key=lambda j: -slots[chosen[j]][2])
+        for k in order:
+            ed, ln, p = slots[chosen[k]]
+            t = int(kinds[k])
             vid = f"v{k}"
             conn.vehicle.add(vid, routeID=ed, typeID=f"t{t}", departLane=str(ln), departPos=f"{p:.3f}",
-                             departSpeed="desired")
+                             departSpeed="max")
             self.types[vid] = self.templates[t]
         self._push(e)
         conn.simulationStep()
