@@ -24,6 +24,7 @@ COMMAND_MODULES = [
     "symdrive_core.traffic.commands",
     "symdrive_core.insertion.commands",
     "symdrive_core.pipeline.commands",
+    "symdrive_core.sim.commands",
 ]
 
 

@@ -1,0 +1,159 @@
+"""Driving agents: what ``symdrive sim --agent`` runs.
+
+An agent has ``reset(env, seed)`` (called at the start of every episode with the environment,
+whose route, road and traffic built-in agents read) and ``act(observation) -> [acceleration,
+steering]``. ``MODULE:CLASS`` names any class with that interface (constructed without
+arguments). Built-in:
+
+* ``replay``: follows the recorded path at the recorded speed (pure pursuit + speed tracking);
+* ``idm``: the Intelligent Driver Model (Treiber, Hennecke and Helbing 2000) behind the nearest
+  vehicle ahead in its lane, and pure pursuit (Coulter 1992) along the lane's middle;
+* ``cut-in``: an aggressive scripted lane change into the neighbouring lane one second in,
+  over ``duration`` seconds, then lane keeping at constant speed.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+
+def pure_pursuit_steer(x, y, yaw, target_xy, wheelbase: float) -> float:
+    """Front-wheel angle that puts the rear axle on the circle through ``target_xy``."""
+    rx, ry = x - 0.5 * wheelbase * np.cos(yaw), y - 0.5 * wheelbase * np.sin(yaw)
+    dx, dy = target_xy[0] - rx, target_xy[1] - ry
+    alpha = np.arctan2(dy, dx) - yaw
+    ld = max(np.hypot(dx, dy), 1e-3)
+    return float(np.arctan2(2.0 * wheelbase * np.sin(alpha), ld))
+
+
+class Agent:
+    """Base class: holds the environment and clips its commands to the limits."""
+
+    def reset(self, env, seed: int | None = None) -> None:
+        self.env = env
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, obs) -> np.ndarray:
+        raise NotImplementedError
+
+    def command(self, accel: float, steer: float) -> np.ndarray:
+        (alo, ahi), (slo, shi) = self.env.action_limits
+        return np.array([np.clip(accel, alo, ahi), np.clip(steer, slo, shi)])
+
+    def follow(self, s_ahead: float, lateral: float, v_target: float, gain: float = 1.0) -> tuple[float, float]:
+        """Pure pursuit to the point ``s_ahead`` metres ahead of the ego's progress, ``lateral``
+        metres left of the route, and a proportional speed controller."""
+        e, env = self.env.ego, self.env
+        s = env.route.progress(e.xy)
+        target = env.route.point_at(s + s_ahead, lateral)
+        steer = pure_pursuit_steer(e.x, e.y, e.yaw, target, env.config.wheelbase_m)
+        return gain * (v_target - e.v), steer
+
+    def lookahead(self) -> float:
+        return max(4.0, 0.8 * self.env.ego.v)
+
+
+class ReplayAgent(Agent):
+    """Drives the recorded path at the recorded speed."""
+
+    def act(self, obs):
+        env = self.env
+        t = env.t + env.dt
+        v_target = float(np.interp(t, env.times, env.recorded_speed))
+        # The recorded path is the route itself; reach the recorded speed in one step.
+        accel, steer = self.follow(self.lookahead(), 0.0, v_target, gain=1.0 / env.dt)
+        return self.command(accel, steer)
+
+
+class IDMAgent(Agent):
+    """IDM car following + pure-pursuit lane keeping in the lane it starts in."""
+
+    a_max = 1.5  # m/s^2
+    b_comf = 2.0  # m/s^2
+    time_headway = 1.5  # s
+    min_gap = 2.0  # m
+    delta = 4.0
+
+    def reset(self, env, seed=None):
+        super().reset(env, seed)
+        self.v0 = max(float(np.max(env.recorded_speed)), 1.0)
+        # Keep the route's own lateral place (the lane the recording drove in).
+        self.lateral = 0.0
+
+    def leader(self) -> tuple[float, float] | None:
+        """(gap m, speed m/s along the route) of the nearest actor ahead in the ego's lane."""
+        env, e = self.env, self.env.ego
+        s_ego = env.route.progress(e.xy)
+        best = None
+        half_lane = 0.5 * env.area.lane_width
+        from ..traffic.road import project_onto
+
+        for a in env.actors:
+            lat, _, _ = project_onto(env.route.xy, a.xy[None])
+            if abs(lat[0] - self.lateral) > half_lane + 0.5 * a.wlh[0]:
+                continue
+            s = env.route.progress(a.xy)
+            gap = s - s_ego - 0.5 * env.wlh[1] - 0.5 * a.wlh[1]
+            if s <= s_ego:
+                continue
+            h = env.route.heading_at(s)
+            v = float(a.velocity @ np.array([np.cos(h), np.sin(h)]))
+            if best is None or gap < best[0]:
+                best = (gap, v)
+        return best
+
+    def idm(self) -> float:
+        v = self.env.ego.v
+        free = 1.0 - (v / self.v0) ** self.delta
+        lead = self.leader()
+        if lead is None:
+            return self.a_max * free
+        gap, v_lead = lead
+        s_star = self.min_gap + max(0.0, v * self.time_headway + v * (v - v_lead) / (2 * np.sqrt(self.a_max * self.b_comf)))
+        return self.a_max * (free - (s_star / max(gap, 0.1)) ** 2)
+
+    def act(self, obs):
+        _, steer = self.follow(self.lookahead(), self.lateral, self.env.ego.v)
+        return self.command(self.idm(), steer)
+
+
+class CutInAgent(IDMAgent):
+    """A scripted aggressive lane change into the neighbouring lane (left when there is room,
+    else right), starting ``start`` seconds in (jittered by the seed) and taking ``duration``
+    seconds, at constant speed and without looking."""
+
+    start = 1.0
+    duration = 1.0
+
+    def reset(self, env, seed=None):
+        super().reset(env, seed)
+        k, _ = env.area.lane_position(env.ego.xy)
+        side = 1 if k + 1 < env.area.lanes else -1
+        self.shift = side * env.area.lane_width
+        self.t_start = self.start + float(self.rng.uniform(-0.2, 0.2))
+
+    def act(self, obs):
+        env = self.env
+        t = env.t - float(env.times[0])
+        u = float(np.clip((t - self.t_start) / self.duration, 0.0, 1.0))
+        lateral = self.shift * (3 * u * u - 2 * u * u * u)  # smoothstep
+        _, steer = self.follow(max(3.0, 0.5 * env.ego.v), lateral, env.ego.v)
+        return self.command(0.0, steer)
+
+
+BUILTIN = {"replay": ReplayAgent, "idm": IDMAgent, "cut-in": CutInAgent}
+
+
+def load_agent(spec: str):
+    """A built-in agent's name or ``MODULE:CLASS`` -> a class (agents are made per episode)."""
+    if spec in BUILTIN:
+        return BUILTIN[spec]
+    if ":" not in spec:
+        raise ValueError(f"--agent: expected one of {', '.join(BUILTIN)} or MODULE:CLASS, got {spec!r}")
+    module, _, name = spec.partition(":")
+    obj = importlib.import_module(module)
+    for part in name.split("."):
+        obj = getattr(obj, part)
+    return obj

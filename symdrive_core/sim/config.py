@@ -1,0 +1,53 @@
+"""Every knob of the simulator, with its default, in one dataclass (defaults live here only)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+
+@dataclass
+class SimConfig:
+    # Time: seconds per step; None = the package's frame interval (median of its timestamps' steps).
+    dt: float | None = None
+    # Episode time limit in seconds; None = time_limit_factor x the recorded drive's duration.
+    time_limit_s: float | None = None
+    time_limit_factor: float = 2.0
+    # Ego vehicle: wlh = (width, length, height) metres; wheelbase of the bicycle model.
+    ego_wlh: tuple[float, float, float] = (1.85, 4.6, 1.5)
+    wheelbase_m: float = 2.8
+    # Where the recorded camera sits on the ego: metres ahead of the box centre (the ego's
+    # ground position at frame 0 is the camera's, moved back by this much along the heading).
+    camera_ahead_m: float = 0.5
+    # Camera height above the ground when the package has no road to read the ground from.
+    camera_height_m: float = 1.6
+    # Action limits: acceleration [m/s^2] and front-wheel steering angle [rad]; actions outside
+    # (or not finite) end the episode with reason "invalid_action".
+    max_accel: float = 4.0
+    max_brake: float = 8.0
+    max_steer: float = 0.6
+    max_speed: float = 40.0  # m/s; the model clamps the speed to [0, max_speed]
+    # Road: without ground_truth.road, a corridor this wide each side of the recorded path.
+    corridor_half_width_m: float = 3.5
+    # Off-road when any footprint corner lies this far beyond the road's edge.
+    offroad_margin_m: float = 0.0
+    # The route (the recorded ego path) ends this far before its last point.
+    route_end_margin_m: float = 1.0
+    # Footprint of actors without wlh.
+    default_actor_wlh: tuple[float, float, float] = (1.8, 4.5, 1.5)
+    # Observations: render the cameras (False: state only, for tests and planners without vision).
+    render: bool = True
+    cameras: list[str] | None = None  # None = every camera of the package
+    image_size: tuple[int, int] | None = None  # (width, height); None = the package's own
+    device: str = "cpu"
+    # Traffic: "replay" keeps the package's actors on their recorded poses; "sumo" drives
+    # vehicles with SUMO/TraCI around the ego.
+    traffic: str = "replay"
+    sumo_vehicles: int = 0  # SUMO traffic: vehicles spread over the road at the start
+    sumo_speed: float = 13.89  # SUMO lane speed limit, m/s
+    sumo_timeout_s: float = 300.0
+    # Score thresholds (NAVSIM / nuPlan values; see scores.py).
+    ttc_horizon_s: float = 1.0
+    extra: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return asdict(self)
