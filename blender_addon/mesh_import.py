@@ -89,6 +89,9 @@ def import_mesh(path: Path, up_axis: str = "AUTO", forward_axis: str = "AUTO") -
     if "FINISHED" not in result or not any(ob.type == "MESH" for ob in created):
         _remove(created)
         raise errors.InputError(path, "the importer produced no mesh")
+    if not any(len(ob.data.polygons) for ob in created if ob.type == "MESH"):
+        _remove(created)  # e.g. an OBJ whose face lines the importer refused (Blender's log says why)
+        raise errors.InputError(path, "the importer produced no faces", "f")
     if not np.allclose(to_actor, np.eye(3)):
         turn = Matrix(to_actor.tolist()).to_4x4()
         for ob in created:

@@ -1,4 +1,5 @@
 import json
+import os
 
 import numpy as np
 import pytest
@@ -76,3 +77,17 @@ def test_broken_mesh_is_reported_and_leaves_nothing_behind(blender, tmp_path):
     assert not [ob for ob in blender.data.objects if ob.symdrive.role == "ACTOR"]
     with pytest.raises(RuntimeError, match="unsupported mesh format"):
         blender.ops.symdrive.import_vehicle(filepath=str(tmp_path / "car.fbx"))
+
+
+def test_special_and_oversized_files_are_reported_not_raised(blender, tmp_path):
+    """A FIFO, a device, and an OBJ whose only face-bearing line is too long for Blender's
+    importer: each is one operator error naming the file, and nothing is left behind."""
+    fifo = tmp_path / "pipe.obj"
+    os.mkfifo(fifo)
+    huge = tmp_path / "huge.obj"
+    huge.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 " + "3" * 300_000 + "\n")
+    for path, message in ((fifo, "pipe.obj"), ("/dev/zero", "/dev/zero"), (huge, "huge.obj: f: the importer produced no faces")):
+        with pytest.raises(RuntimeError, match=message):
+            blender.ops.symdrive.import_vehicle(filepath=str(path))
+    assert not [ob for ob in blender.data.objects if ob.symdrive.role == "ACTOR"]
+    assert not [ob for ob in blender.data.objects if ob.type == "MESH"]
