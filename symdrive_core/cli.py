@@ -22,6 +22,7 @@ COMMAND_MODULES = [
     "symdrive_core.traffic.commands",
     "symdrive_core.insertion.commands",
     "symdrive_core.pipeline.commands",
+    "symdrive_core.importers.commands",
 ]
 
 
