@@ -29,6 +29,9 @@ class Source:
     splats_path: Path | None = None
     points: np.ndarray | None = None  # [N, 3] sparse points
     colors: np.ndarray | None = None  # [N, 3] in [0, 1]
+    # Maps the original reconstruction's frame to the frame the poses are written in (nerfstudio's
+    # applied_transform); None: the same frame.
+    pre: np.ndarray | None = None
     notes: dict = field(default_factory=dict)
 
 
@@ -147,7 +150,9 @@ def write_package(src: Source, opt: Options) -> dict:
             "format": "symdrive-scene", "version": 1, "name": name,
             "frames": [{"index": i, "timestamp": t} for i, t in enumerate(g.timestamps)],
             "cameras": cams, "background": background, "actors": [],
-            "source": {"format": src.format, "path": str(src.path), "transform": T.tolist(),
+            "source": {"format": src.format, "path": str(src.path),
+                       "transform": (T if src.pre is None else T @ src.pre).tolist(),
+                       **({} if src.pre is None else {"poses_transform": T.tolist()}),
                        "frame_names": list(g.frame_keys), **record, **src.notes},
             "ground_truth": {"camera": g.cameras[0], "train_frames": train, "heldout_frames": held},
         }

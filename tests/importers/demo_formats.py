@@ -160,6 +160,7 @@ def write_gs_output(world: World, model: Path, images: Path, *, iterations=(7000
     (model / "cfg_args").write_text(
         f"Namespace(data_device='cuda', eval=False, images='images', model_path={str(model)!r}, "
         f"resolution=-1, sh_degree=3, source_path={str(images.parent)!r}, white_background=False)")
+    write_points(model / "input.ply", world.points, world.colors)  # the trainer's copy of its SfM points
     for it in iterations:
         g = world.splats if it == max(iterations) else world.splats.subset(np.arange(10))
         write_splats(model / "point_cloud" / f"iteration_{it}" / "point_cloud.ply", g)
