@@ -80,10 +80,11 @@ def read_colmap(model_dir: str | Path, images: str | Path | None, *, splats: str
     views = []
     for iid, im in sorted(rec.images.items()):
         where = f"image_id {iid} ({im.name})"
-        if not im.has_pose:
+        if not getattr(im, "has_pose", True):
             continue
+        pose = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
         w2c = np.eye(4)
-        w2c[:3, :4] = np.asarray(im.cam_from_world().matrix(), dtype=np.float64)
+        w2c[:3, :4] = np.asarray(pose.matrix(), dtype=np.float64)
         if not np.all(np.isfinite(w2c)):
             raise InputError(img_file, "pose is not finite (NaN or Inf)", where)
         if im.camera_id not in Ks:
