@@ -67,7 +67,7 @@ def _check_images(g: Grouped) -> None:
             if v.image is None:
                 continue
             if not v.image.is_file():
-                raise InputError(v.image, f"image not found (named by {v.source}: {v.where})", v.where)
+                raise InputError(v.image, f"image not found (named by {v.source.name})", v.where)
             w, h, _ = image_size(v.image, v.where)
             if (w, h) != (v.width, v.height):
                 raise InputError(v.image, f"image is {w}x{h}, the camera ({v.source}: {v.where}) is "
