@@ -106,5 +106,5 @@ def test_imported_renders_match_native(fmt, tmp_path):
         a = r_native.render("front", frame, []).rgb
         rb = r_imported.render("front", frame, [])
         b = rb.rgb
-        assert rb.alpha.mean() > 0.9  # the imported splats are in front of the imported cameras
+        assert rb.alpha.mean() > 0.3  # not an empty view: the splats are in front of the cameras
         assert psnr(b, a) >= 40.0, (frame, psnr(b, a))
