@@ -12,7 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.importers.similarity import apply_camera, apply_points, make_similarity, transform_gaussians
+from symdrive_core.importers.similarity import (
+    apply_camera,
+    apply_points,
+    make_similarity,
+    transform_gaussians,
+)
 from symdrive_core.io.ply import read_splats, write_splats
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.poses import quat_normalize, quat_to_matrix

@@ -9,7 +9,14 @@ import pytest
 
 from symdrive_core.cli import main
 
-from .demo_formats import CAMERA_HEIGHT, demo_world, link_images, write_colmap, write_gs_output, write_nerfstudio
+from .demo_formats import (
+    CAMERA_HEIGHT,
+    demo_world,
+    link_images,
+    write_colmap,
+    write_gs_output,
+    write_nerfstudio,
+)
 
 pytest.importorskip("pycolmap")
 

@@ -13,8 +13,16 @@ from symdrive_core.importers.similarity import apply_points
 from symdrive_core.metrics import psnr
 from symdrive_core.scene import check_files, load_manifest
 
-from .demo_formats import (CAMERA_HEIGHT, DEMO, demo_splats, demo_world, link_images, write_colmap, write_gs_output,
-                           write_nerfstudio)
+from .demo_formats import (
+    CAMERA_HEIGHT,
+    DEMO,
+    demo_splats,
+    demo_world,
+    link_images,
+    write_colmap,
+    write_gs_output,
+    write_nerfstudio,
+)
 
 pytest.importorskip("pycolmap")
 
