@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --upgrade pip
 	# The CPU build, named exactly: an open `torch` requirement would pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install torch==2.13.0
-	$(BIN)/python -m pip install -e ".[dev,blender,diffusion,dist,traffic,sim]"
+	$(BIN)/python -m pip install -e ".[dev,blender,diffusion,dist,traffic,sim,import]"
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -25,6 +25,7 @@ COMMAND_MODULES = [
     "symdrive_core.insertion.commands",
     "symdrive_core.pipeline.commands",
     "symdrive_core.sim.commands",
+    "symdrive_core.importers.commands",
 ]
 
 

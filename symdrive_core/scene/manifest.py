@@ -132,6 +132,8 @@ class Manifest:
     effects: Effects = field(default_factory=Effects)
     output: str = "output"
     ground_truth: dict = field(default_factory=dict)
+    # Where an imported package came from: ``transform`` maps the source frame to this world.
+    source: dict = field(default_factory=dict)
     root: Path = field(default_factory=Path.cwd)
     path: Path | None = None
     # Whether asset paths may lead outside the package (``--allow-external-assets``).
@@ -259,6 +261,8 @@ class Manifest:
         }
         if self.ground_truth:
             out["ground_truth"] = self.ground_truth
+        if self.source:
+            out["source"] = self.source
         return out
 
     def save(self, path: str | os.PathLike | None = None) -> Path:
@@ -559,12 +563,19 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
                       rd.boolean(e.get("finetune", False), "effects.finetune"),
                       rd.boolean(e.get("shadows", False), "effects.shadows"), sun, ratio)
     gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
+    source = rd.obj(d.get("source", {}), "source")
+    if "transform" in source:
+        T = rd.matrix(source["transform"], 4, 4, "source.transform")
+        det = np.linalg.det(T[:3, :3])
+        if not np.allclose(T[3], [0, 0, 0, 1]) or det <= 0 or not _rigid_ok(
+                np.vstack([np.hstack([T[:3, :3] / np.cbrt(det), T[:3, 3:]]), [0, 0, 0, 1]])):
+            rd.fail("source.transform", "not a similarity (scaled rotation, positive scale, last row 0 0 0 1)")
     return Manifest(
         name=name, frames=frames, cameras=cameras, actors=actors,
         background_splats=rd.ref(bg.get("splats"), "background.splats"),
         background_points=rd.ref(bg.get("points"), "background.points"),
         masks=masks, id_maps=id_maps, effects=effects,
-        output=rd.output(d.get("output", "output")), ground_truth=gt,
+        output=rd.output(d.get("output", "output")), ground_truth=gt, source=source,
         root=path.parent, path=path, allow_external=allow_external)
 
 

@@ -1,0 +1,103 @@
+"""``symdrive import colmap|nerfstudio|3dgs``: a reconstruction of a recorded drive -> a scene package."""
+
+from __future__ import annotations
+
+import time
+
+
+def _common(p, images: bool) -> None:
+    if images:
+        p.add_argument("--images", help="folder of the recorded images (paths in the model are relative to it)")
+    p.add_argument("--out", required=True, help="scene package folder to write (written whole, or not at all)")
+    p.add_argument("--splats", help="trained 3DGS splat PLY in the same frame as the cameras")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--camera-height", type=float,
+                   help="the cameras' height above the ground in metres (sets the metric scale)")
+    g.add_argument("--scale", type=float, help="metres per source unit (instead of --camera-height)")
+    p.add_argument("--up", help="the world's up direction x,y,z in the source frame (default: fitted ground "
+                                "plane, checked against the cameras' mean up vector)")
+    p.add_argument("--heldout-every", type=int, metavar="N",
+                   help="hold every N-th frame out of training for evaluation (N=5: frames 2, 7, 12, ...)")
+    p.add_argument("--copy-images", action="store_true",
+                   help="copy the images into the package (default: reference them, relative to the package)")
+    p.add_argument("--camera-name", default="front", help="name of the package camera when there is one (front)")
+    p.add_argument("--fps", type=float, default=10.0, help="frame rate for timestamps when the source has none")
+    p.add_argument("--name", help="scene name (default: the package folder's name)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+
+
+def add_commands(sub) -> None:
+    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package")
+    isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
+    p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary), PINHOLE/SIMPLE_PINHOLE cameras")
+    p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
+    _common(p, images=True)
+    p.set_defaults(func=_colmap)
+    p = isub.add_parser("nerfstudio", help="nerfstudio transforms.json (OpenGL camera axes)")
+    p.add_argument("transforms", metavar="TRANSFORMS_JSON")
+    _common(p, images=False)
+    p.set_defaults(func=_nerfstudio)
+    p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
+    p.add_argument("model", metavar="MODEL_DIR")
+    _common(p, images=True)
+    p.add_argument("--iteration", type=int, help="point_cloud/iteration_N to use (default: the newest)")
+    p.set_defaults(func=_gs)
+
+
+def _options(args):
+    from pathlib import Path
+
+    from ..errors import InputError
+    from .package import Options, parse_up
+
+    if args.camera_height is not None and not args.camera_height > 0:
+        raise InputError("--camera-height", f"expected a positive height in metres, got {args.camera_height}")
+    if args.scale is not None and not args.scale > 0:
+        raise InputError("--scale", f"expected a positive number, got {args.scale}")
+    if args.heldout_every is not None and args.heldout_every < 2:
+        raise InputError("--heldout-every", f"expected N >= 2, got {args.heldout_every}")
+    if not args.fps > 0:
+        raise InputError("--fps", f"expected a positive frame rate, got {args.fps}")
+    return Options(out=Path(args.out), camera_height=args.camera_height, scale=args.scale, up=parse_up(args.up),
+                   heldout_every=args.heldout_every, copy_images=args.copy_images, force=args.force, name=args.name)
+
+
+def _finish(src, args, t0) -> int:
+    from .package import write_package
+
+    info = write_package(src, _options(args))
+    print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
+          f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
+          f"({time.perf_counter() - t0:.1f} s)")
+    if info["external_images"]:
+        print("note: the images stay outside the package; symdrive validate/run need --allow-external-assets "
+              "(or import again with --copy-images)")
+    return 0
+
+
+def _colmap(args) -> int:
+    from .colmap import read_colmap
+
+    t0 = time.perf_counter()
+    _options(args)
+    src = read_colmap(args.model, args.images, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
+    return _finish(src, args, t0)
+
+
+def _nerfstudio(args) -> int:
+    from .nerfstudio import read_nerfstudio
+
+    t0 = time.perf_counter()
+    _options(args)
+    src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
+    return _finish(src, args, t0)
+
+
+def _gs(args) -> int:
+    from .gs_trainer import read_gs_output
+
+    t0 = time.perf_counter()
+    _options(args)
+    src = read_gs_output(args.model, args.images, iteration=args.iteration, splats=args.splats,
+                         camera_name=args.camera_name, fps=args.fps)
+    return _finish(src, args, t0)

@@ -1,0 +1,139 @@
+"""Recorded views -> package cameras on shared frames (rigs), in time order.
+
+Each importer turns its source into :class:`View` records (one per image, OpenCV camera-to-world
+in the source frame). :func:`group_views` groups them into package cameras and frames:
+
+* the camera of a view is the first folder of its image name when the images are laid out as
+  ``{camera}/{frame}.ext`` (two or more such folders), else the source's camera id when it has
+  several, else one camera;
+* a frame is an instant the rig recorded: the rest of the image name in the folder layout, the
+  n-th image by name of each camera otherwise;
+* frames are ordered by timestamp when every view has one, else by image name (numbers inside
+  names compare as numbers, so ``img10`` follows ``img9``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from ..errors import InputError
+from ..scene.paths import check_name
+
+
+@dataclass
+class View:
+    name: str  # image name as the source writes it (relative path, '/' separated)
+    K: np.ndarray  # [3, 3]
+    width: int
+    height: int
+    c2w: np.ndarray  # [4, 4] OpenCV camera-to-world, source frame
+    source: Path  # the file the view was read from (for messages)
+    where: str  # the field in that file (for messages)
+    image: Path | None = None  # the recorded image on disk
+    camera_id: str = "0"  # the source's camera id
+    timestamp: float | None = None
+
+
+@dataclass
+class Grouped:
+    cameras: list[str]
+    frame_keys: list[str]
+    table: list[list[View]]  # [camera][frame]
+    timestamps: list[float]
+
+
+def natural_key(text: str):
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", text) if t]
+
+
+def check_views(views: list[View]) -> None:
+    """Duplicate image names, non-finite or non-rigid poses, bad intrinsics: InputError naming
+    the file and the field."""
+    if not views:
+        raise InputError("(input)", "no registered images", "images")
+    seen: dict[str, View] = {}
+    for v in views:
+        if v.name in seen:
+            raise InputError(v.source, f"duplicate image name {v.name!r} (also at {seen[v.name].where})", v.where)
+        seen[v.name] = v
+        if not np.all(np.isfinite(v.c2w)):
+            raise InputError(v.source, "pose is not finite (NaN or Inf)", v.where)
+        R = v.c2w[:3, :3]
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or abs(np.linalg.det(R) - 1) > 1e-4:
+            raise InputError(v.source, "pose rotation is not a rotation (orthonormal, det +1)", v.where)
+        if not np.all(np.isfinite(v.K)) or v.K[0, 0] <= 0 or v.K[1, 1] <= 0:
+            raise InputError(v.source, f"intrinsics are not usable: fx={v.K[0, 0]}, fy={v.K[1, 1]}", v.where)
+        if v.width < 1 or v.height < 1:
+            raise InputError(v.source, f"image size {v.width}x{v.height}", v.where)
+        if v.timestamp is not None and not np.isfinite(v.timestamp):
+            raise InputError(v.source, f"timestamp {v.timestamp} is not finite", v.where)
+
+
+def _folder_layout(views: list[View]) -> bool:
+    parts = [PurePosixPath(v.name).parts for v in views]
+    return all(len(p) >= 2 for p in parts) and len({p[0] for p in parts}) >= 2
+
+
+def group_views(views: list[View], *, camera_name: str = "front", fps: float = 10.0) -> Grouped:
+    check_views(views)
+    by_cam: dict[str, dict[str, View]] = {}
+    if _folder_layout(views):
+        for v in views:
+            p = PurePosixPath(v.name)
+            cam, key = p.parts[0], str(PurePosixPath(*p.parts[1:]).with_suffix(""))
+            by_cam.setdefault(cam, {})[key] = v
+    else:
+        ids = sorted({v.camera_id for v in views}, key=natural_key)
+        for cid in ids:
+            mine = sorted((v for v in views if v.camera_id == cid), key=lambda v: natural_key(v.name))
+            cam = camera_name if len(ids) == 1 else f"camera{cid}"
+            if len(ids) == 1:
+                by_cam[cam] = {v.name: v for v in mine}
+            else:
+                by_cam[cam] = {f"{i:06d}": v for i, v in enumerate(mine)}
+        if len(ids) > 1:
+            counts = {c: len(d) for c, d in by_cam.items()}
+            if len(set(counts.values())) != 1:
+                v = views[0]
+                raise InputError(v.source, "cameras have different numbers of images "
+                                 f"({', '.join(f'{c}: {n}' for c, n in counts.items())}); lay the images out as "
+                                 "{camera}/{frame}.ext so frames can be matched", "camera_id")
+    cameras = sorted(by_cam, key=natural_key)
+    for cam in cameras:
+        v = next(iter(by_cam[cam].values()))
+        check_name(cam, v.where, v.source)
+    keys = set.intersection(*(set(d) for d in by_cam.values()))
+    if not keys:
+        v = views[0]
+        raise InputError(v.source, f"the cameras {', '.join(cameras)} share no frame", "images")
+    for cam in cameras:  # one size per camera
+        vs = [by_cam[cam][k] for k in keys]
+        for v in vs:
+            if (v.width, v.height) != (vs[0].width, vs[0].height):
+                raise InputError(v.source, f"image is {v.width}x{v.height}, other images of camera {cam!r} are "
+                                 f"{vs[0].width}x{vs[0].height}", v.where)
+    have_time = all(v.timestamp is not None for d in by_cam.values() for v in d.values())
+    if have_time:
+        t = {k: min(by_cam[c][k].timestamp for c in cameras) for k in keys}
+        order = sorted(keys, key=lambda k: (t[k], natural_key(k)))
+        times = [float(t[k]) for k in order]
+        if any(b <= a for a, b in zip(times, times[1:])):
+            times = [i / fps for i in range(len(order))]
+    else:
+        order = sorted(keys, key=natural_key)
+        times = [i / fps for i in range(len(order))]
+    table = [[by_cam[c][k] for k in order] for c in cameras]
+    return Grouped(cameras, order, table, times)
+
+
+def split_heldout(n_frames: int, every: int | None) -> tuple[list[int], list[int]]:
+    """(train, held-out) frame indices: every ``every``-th frame held out, starting in the middle
+    of the first block (``every=5``: 2, 7, 12, ...), as the demo street does."""
+    if not every or every < 2:
+        return list(range(n_frames)), []
+    held = [i for i in range(n_frames) if i % every == every // 2]
+    return [i for i in range(n_frames) if i not in set(held)], held

@@ -1,0 +1,165 @@
+"""Write an imported scene package atomically: checked inputs, a temporary folder beside the
+target, the core's own validation, then one rename. Bad input leaves nothing behind."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import conventions
+from ..errors import InputError
+from ..gaussians import Gaussians
+from .frames import Grouped, split_heldout
+from .ground import alignment, fit_ground
+from .similarity import apply_camera, apply_points, transform_gaussians
+
+
+@dataclass
+class Source:
+    """What an importer read: views plus the reconstruction's geometry, in the source frame."""
+
+    format: str
+    path: Path
+    grouped: Grouped
+    splats: Gaussians | None = None
+    splats_path: Path | None = None
+    points: np.ndarray | None = None  # [N, 3] sparse points
+    colors: np.ndarray | None = None  # [N, 3] in [0, 1]
+    # Maps the original reconstruction's frame to the frame the poses are written in (nerfstudio's
+    # applied_transform); None: the same frame.
+    pre: np.ndarray | None = None
+    notes: dict = field(default_factory=dict)
+
+
+@dataclass
+class Options:
+    out: Path
+    camera_height: float | None = None
+    scale: float | None = None
+    up: tuple[float, float, float] | None = None
+    heldout_every: int | None = None
+    copy_images: bool = False
+    force: bool = False
+    name: str | None = None
+
+
+def parse_up(text: str | None):
+    if text is None:
+        return None
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 3 or not np.all(np.isfinite(v)) or np.linalg.norm(v) == 0:
+        raise InputError("--up", f"expected three numbers x,y,z (not all zero), got {text!r}")
+    return tuple(v)
+
+
+def _check_images(g: Grouped) -> None:
+    from ..io.images import image_size
+
+    for cam, row in zip(g.cameras, g.table):
+        for v in row:
+            if v.image is None:
+                continue
+            if not v.image.is_file():
+                raise InputError(v.image, f"image not found (named by {v.source.name})", v.where)
+            w, h, _ = image_size(v.image, v.where)
+            if (w, h) != (v.width, v.height):
+                raise InputError(v.image, f"image is {w}x{h}, the camera ({v.source}: {v.where}) is "
+                                 f"{v.width}x{v.height}", v.where)
+
+
+def _link_or_copy(src: Path, dst: Path) -> None:
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        path.resolve().relative_to(folder.resolve())
+        return True
+    except ValueError:
+        return False
+
+
+def write_package(src: Source, opt: Options) -> dict:
+    """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
+    summary (frames, cameras, transform, where the images are, whether the package reads files
+    outside itself)."""
+    from ..io.atomic import atomic_directory
+    from ..io.ply import write_splats
+    from ..scene.manifest import check_files, load_manifest, parse_manifest
+    from ..world.points import write_points
+
+    out = Path(opt.out)
+    if out.exists() and not opt.force and (not out.is_dir() or any(out.iterdir())):
+        raise InputError(out, "exists and is not empty; pass --force to replace it", "--out")
+    g = src.grouped
+    _check_images(g)
+    c2ws = np.stack([v.c2w for row in g.table for v in row])
+    pts = None
+    if src.points is not None and len(src.points):
+        pts = src.points
+    elif src.splats is not None and len(src.splats):
+        pts = src.splats.means
+    ground = fit_ground(pts, c2ws, up=opt.up) if pts is not None else None
+    T, record = alignment(ground, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
+    name = opt.name or out.resolve().name
+    external = False
+    with atomic_directory(out) as tmp:
+        cams = []
+        for cam, row in zip(g.cameras, g.table):
+            frames = []
+            for fi, v in enumerate(row):
+                c2w = apply_camera(T, v.c2w)
+                entry = {"K": v.K.tolist(), "camera_to_world": c2w.tolist(),
+                         "world_to_camera": conventions.invert_rigid(c2w).tolist()}
+                if v.image is not None:
+                    if opt.copy_images:
+                        rel = f"images/{cam}/{fi:06d}{v.image.suffix.lower()}"
+                        dst = tmp / rel
+                        dst.parent.mkdir(parents=True, exist_ok=True)
+                        shutil.copy2(v.image, dst)
+                    elif _inside(v.image, out):
+                        rel = v.image.resolve().relative_to(out.resolve()).as_posix()
+                        _link_or_copy(v.image, tmp / rel)
+                    else:
+                        rel = Path(os.path.relpath(v.image.resolve(), out.resolve())).as_posix()
+                        external = True
+                    entry["image"] = rel
+                frames.append(entry)
+            cams.append({"name": cam, "width": row[0].width, "height": row[0].height, "frames": frames})
+        background = {}
+        if src.splats is not None:
+            write_splats(tmp / "reconstruction" / "background.ply", transform_gaussians(src.splats, T))
+            background["splats"] = "reconstruction/background.ply"
+        if src.points is not None and len(src.points):
+            colors = src.colors if src.colors is not None else np.full((len(src.points), 3), 0.5)
+            write_points(tmp / "background" / "points.ply", apply_points(T, src.points), colors)
+            background["points"] = "background/points.ply"
+        train, held = split_heldout(len(g.frame_keys), opt.heldout_every)
+        data = {
+            "format": "symdrive-scene", "version": 1, "name": name,
+            "frames": [{"index": i, "timestamp": t} for i, t in enumerate(g.timestamps)],
+            "cameras": cams, "background": background, "actors": [],
+            "source": {"format": src.format, "path": str(src.path),
+                       "transform": (T if src.pre is None else T @ src.pre).tolist(),
+                       **({} if src.pre is None else {"poses_transform": T.tolist()}),
+                       "frame_names": list(g.frame_keys), **record, **src.notes},
+            "ground_truth": {"camera": g.cameras[0], "train_frames": train, "heldout_frames": held},
+        }
+        m = parse_manifest(data, tmp / "manifest.json", allow_external=external)
+        m.save()
+        m = load_manifest(tmp, allow_external=external)
+        check_files(m)
+    return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
+            "scale": record["scale"], "camera_height_m": record["camera_height_m"],
+            "external_images": external, "transform": T}
