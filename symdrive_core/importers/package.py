@@ -100,8 +100,11 @@ def write_package(src: Source, opt: Options) -> dict:
     from ..world.points import write_points
 
     out = Path(opt.out)
-    if out.exists() and not opt.force and (not out.is_dir() or any(out.iterdir())):
-        raise InputError(out, "exists and is not empty; pass --force to replace it", "--out")
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        if not (out / "manifest.json").is_file():  # somebody's folder: never replaced, --force or not
+            raise InputError(out, "exists, is not empty and is not a scene package; choose another folder", "--out")
+        if not opt.force:
+            raise InputError(out, "a scene package is already there; pass --force to replace it", "--out")
     g = src.grouped
     _check_images(g)
     c2ws = np.stack([v.c2w for row in g.table for v in row])

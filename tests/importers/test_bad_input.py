@@ -155,11 +155,18 @@ def test_no_ground_says_how_to_pass_up(world, tmp_path, capsys):
     assert_refused(rc, err, out, "--up")
 
 
-def test_existing_package_is_kept_without_force(world, tmp_path, capsys):
+def test_an_existing_folder_is_replaced_only_when_a_package_and_asked(world, tmp_path, capsys):
     args = colmap_args(world, tmp_path)
     link_images(world, tmp_path / "images")
     out = tmp_path / "pkg"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
     rc, err = run_import(args, out, capsys)
-    assert rc == 2 and "--force" in err and (out / "keep.txt").read_text() == "mine"
+    assert rc == 2 and "not a scene package" in err and (out / "keep.txt").read_text() == "mine"
+    rc, err = run_import([*args, "--force"], out, capsys)  # somebody's folder: --force does not replace it
+    assert rc == 2 and (out / "keep.txt").read_text() == "mine"
+    (out / "keep.txt").unlink()
+    assert run_import(args, out, capsys)[0] == 0  # an empty folder is fine
+    rc, err = run_import(args, out, capsys)
+    assert rc == 2 and "--force" in err and (out / "manifest.json").is_file()
+    assert run_import([*args, "--force"], out, capsys)[0] == 0  # a package is replaced when asked
