@@ -15,7 +15,7 @@ class SYMDRIVE_OT_render_preview(bpy.types.Operator):
 
     bl_idname = "symdrive.render_preview"
     bl_label = "Render Preview"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     resolution: IntProperty(
         name="Lines",
