@@ -12,8 +12,6 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 
 
@@ -51,6 +49,8 @@ def preview_size(width: int, height: int, out_width: int | None = None,
 def scaled_camera(camera, width: int, height: int):
     """``camera`` seen at ``width`` x ``height``: K scaled per axis (pixel centres at +0.5, so
     scaling the continuous image coordinates is exact)."""
+    import numpy as np
+
     if (width, height) == (camera.width, camera.height):
         return camera
     S = np.diag([width / camera.width, height / camera.height, 1.0])
