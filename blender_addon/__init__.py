@@ -20,7 +20,7 @@ _unregister = None
 
 def _classes():
     from . import panels, prefs, props
-    from .operators import cameras, export_scene, fit_size, import_splats, import_vehicle, trajectory
+    from .operators import cameras, export_scene, fit_size, import_splats, import_vehicle, preview, trajectory
 
     return (
         *props.classes,
@@ -34,6 +34,7 @@ def _classes():
         trajectory.SYMDRIVE_OT_import_sumo_fcd,
         cameras.SYMDRIVE_OT_import_camera_rig,
         export_scene.SYMDRIVE_OT_export_scene,
+        preview.SYMDRIVE_OT_render_preview,
         *panels.panels,
     )
 

@@ -27,6 +27,7 @@ class SYMDRIVE_PT_main(_Sidebar, bpy.types.Panel):
         col.operator("symdrive.import_vehicle", icon="AUTO")
         col.operator("symdrive.import_camera_rig", icon="CAMERA_DATA")
         layout.prop(settings, "background")
+        layout.operator("symdrive.render_preview", icon="RENDER_STILL")
 
 
 class SYMDRIVE_PT_object(_Sidebar, bpy.types.Panel):

@@ -1,4 +1,5 @@
-"""Pipeline subcommands: ``plan`` (what a scene needs, without running it) ``run`` and ``batch``."""
+"""Pipeline subcommands: ``plan`` (what a scene needs, without running it) ``run``, ``batch`` and
+``render`` (a quick look at one camera)."""
 
 from __future__ import annotations
 
@@ -35,6 +36,10 @@ def add_commands(sub) -> None:
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_external_assets_option(p)
     p.set_defaults(func=_batch)
+
+    from .render_command import add_render_command
+
+    add_render_command(sub)
 
     p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
     p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")

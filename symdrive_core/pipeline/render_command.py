@@ -1,0 +1,130 @@
+"""``symdrive render``: one camera's frames of a scene package, background and every posed actor.
+
+A quick look at a scene (the Blender add-on's preview uses it), not a run: no plan, no stages,
+no masks. Frames are written as ``render/<camera>/<frame:06d>.png`` inside ``--out``, every
+path built by :class:`OutputTree` and every file written atomically. ``--width``/``--height``
+render at another size than the package's, the intrinsics scaled to match (aspect kept when
+only one is given).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def parse_frames(text: str, n_frames: int, where: str = "--frames") -> list[int]:
+    """``A`` or ``A:B`` (inclusive, package frame indices) -> the frame list, checked against ``n_frames``."""
+    parts = str(text).split(":")
+    try:
+        if len(parts) == 1:
+            a = b = int(parts[0])
+        elif len(parts) == 2:
+            a, b = int(parts[0]), int(parts[1])
+        else:
+            raise ValueError
+    except ValueError:
+        raise InputError(where, f"expected A or A:B (frame indices), got {text!r}") from None
+    if a < 0 or b < a or b >= n_frames:
+        raise InputError(where, f"frames {text!r} not within 0:{n_frames - 1}")
+    return list(range(a, b + 1))
+
+
+def preview_size(width: int, height: int, out_width: int | None = None,
+                 out_height: int | None = None) -> tuple[int, int]:
+    """The output size: as given, or the missing side from the camera's aspect."""
+    if out_width is None and out_height is None:
+        return width, height
+    if out_width is None:
+        out_width = max(1, round(out_height * width / height))
+    if out_height is None:
+        out_height = max(1, round(out_width * height / width))
+    if out_width < 1 or out_height < 1:
+        raise InputError("--width/--height", f"size must be positive, got {out_width}x{out_height}")
+    return int(out_width), int(out_height)
+
+
+def scaled_camera(camera, width: int, height: int):
+    """``camera`` seen at ``width`` x ``height``: K scaled per axis (pixel centres at +0.5, so
+    scaling the continuous image coordinates is exact)."""
+    import numpy as np
+
+    if (width, height) == (camera.width, camera.height):
+        return camera
+    S = np.diag([width / camera.width, height / camera.height, 1.0])
+    frames = [replace(f, K=S @ np.asarray(f.K, dtype=np.float64)) for f in camera.frames]
+    return replace(camera, width=width, height=height, frames=frames)
+
+
+def preview_manifest(manifest, camera: str, width: int | None = None, height: int | None = None):
+    """The manifest with just ``camera``, scaled to the requested size."""
+    try:
+        cam = manifest.camera(camera)
+    except KeyError:
+        names = ", ".join(c.name for c in manifest.cameras) or "none"
+        raise InputError(manifest.path or manifest.root, f"no camera named {camera!r} (cameras: {names})",
+                         "cameras") from None
+    w, h = preview_size(cam.width, cam.height, width, height)
+    return replace(manifest, cameras=[scaled_camera(cam, w, h)])
+
+
+def render_images(manifest, camera: str, frames: list[int], *, width: int | None = None,
+                  height: int | None = None, device: str = "cpu"):
+    """Yield ``(frame, rgb [H, W, 3] float)`` for ``frames`` of ``camera``: background splats and
+    every actor posed in that frame."""
+    from .scene_render import SceneRenderer
+
+    m = preview_manifest(manifest, camera, width, height)
+    renderer = SceneRenderer(m, device=device)
+    for fi in frames:
+        yield fi, renderer.render(camera, fi).rgb
+
+
+def render_package(package, camera: str, frames: str, out, *, width: int | None = None, height: int | None = None,
+                   device: str = "cpu", allow_external: bool = False, progress: bool = False) -> list[Path]:
+    """``symdrive render``: write the frames as PNGs under ``out``; returns their paths."""
+    from tqdm import tqdm
+
+    from ..io.images import write_image
+    from ..scene import check_files, load_manifest
+    from .outputs import OutputTree
+
+    manifest = load_manifest(package, allow_external=allow_external)
+    m = preview_manifest(manifest, camera, width, height)  # the camera checked before any asset is read
+    frame_list = parse_frames(frames, len(m.cameras[0].frames))
+    check_files(manifest)
+    tree = OutputTree(Path(out))
+    written = []
+    images = render_images(manifest, camera, frame_list, width=width, height=height, device=device)
+    for fi, rgb in tqdm(images, total=len(frame_list), desc="render", unit="frame", disable=not progress):
+        written.append(write_image(tree.frame("render", camera, fi), rgb))
+    return written
+
+
+def add_render_command(sub) -> None:
+    from ..cli import add_external_assets_option, device_arg
+
+    p = sub.add_parser("render", help="render one camera's frames of a scene package (background and actors) "
+                                      "as PNGs, a quick preview without a run")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--camera", required=True, help="camera name in the manifest")
+    p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
+    p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
+    p.add_argument("--width", type=int, help="output width (default: the camera's; aspect kept if only "
+                                             "--height is given)")
+    p.add_argument("--height", type=int, help="output height (default: the camera's)")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_external_assets_option(p)
+    p.set_defaults(func=_render)
+
+
+def _render(args) -> int:
+    paths = render_package(args.package, args.camera, args.frames, args.out, width=args.width, height=args.height,
+                           device=args.device, allow_external=args.allow_external_assets,
+                           progress=not args.quiet)
+    for p in paths:
+        print(p)
+    return 0
