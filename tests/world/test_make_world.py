@@ -41,6 +41,14 @@ def test_package_is_valid_and_complete(package):
         assert read_image(package.resolve(rel)).shape == (27, 48, 3)
 
 
+def test_package_was_rendered_by_this_blender(package):
+    """The generator runs as a subprocess with ``sys.executable``: it must find the same ``bpy``
+    as this process (so a test run against a given Blender renders with that Blender)."""
+    import bpy
+
+    assert package.ground_truth["generator"]["blender"] == bpy.app.version_string
+
+
 def test_depth_is_opencv_z_of_the_road(package):
     """Bottom-centre pixels see the flat road (z = 0): their Cycles depth must equal the
     z-depth of that ray's hit with the ground, from the manifest's K and camera pose."""
