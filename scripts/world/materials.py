@@ -10,17 +10,19 @@ from __future__ import annotations
 
 import bpy
 
+from . import compat
+
 
 def _principled(name: str, color, roughness=0.6, metallic=0.0, specular=0.5):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    tree = compat.node_tree(mat)
+    bsdf = tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (*color, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness
     bsdf.inputs["Metallic"].default_value = metallic
     bsdf.inputs["Specular IOR Level"].default_value = specular
     mat["albedo"] = list(color)
-    return mat, mat.node_tree, bsdf
+    return mat, tree, bsdf
 
 
 def _link(tree, a, b):
@@ -142,20 +144,18 @@ def sky_world(overcast: bool, sun_elevation: float, sun_rotation: float, strengt
     """World background: a Nishita sky (sun disc off: the sun lamp lights the scene) or a flat
     overcast grey."""
     world = bpy.data.worlds.new("sky")
-    world.use_nodes = True
-    tree = world.node_tree
+    tree = compat.node_tree(world)
     bg = tree.nodes["Background"]
     if overcast:
         bg.inputs["Color"].default_value = (0.78, 0.8, 0.83, 1.0)
         bg.inputs["Strength"].default_value = strength
     else:
         sky = tree.nodes.new("ShaderNodeTexSky")
-        sky.sky_type = "NISHITA"
+        compat.set_single_scattering_sky(sky, dust_density=1.5)
         sky.sun_disc = False
         sky.sun_elevation = sun_elevation
         sky.sun_rotation = sun_rotation
         sky.air_density = 1.0
-        sky.dust_density = 1.5
         _link(tree, sky.outputs["Color"], bg.inputs["Color"])
         bg.inputs["Strength"].default_value = strength
     return world

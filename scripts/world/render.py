@@ -1,9 +1,10 @@
 """Cycles on the CPU: one call renders a camera pose to colour, z-depth and object ids.
 
-Everything comes from one multilayer EXR per render (read back with OpenImageIO): the
-denoised combined pass (linear), the Z pass and the object-index pass. Cycles writes Z and
-object index from a single sample per pixel, so ids are exact and depth is not blended at
-edges. Colour is converted to display sRGB here ("Standard" view, no look).
+Everything comes from one multilayer EXR per render (read back with OpenImageIO, all of its
+parts: Blender 5.0 writes each pass as a part of its own): the denoised combined pass (linear),
+the Z pass and the object-index pass. Cycles writes Z and object index from a single sample per
+pixel, so ids are exact and depth is not blended at edges. Colour is converted
+to display sRGB here ("Standard" view, no look).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from mathutils import Matrix
 
 from symdrive_core import conventions
 
+from . import compat
 from .quiet import quiet_stdout
 
 SKY_DEPTH = 1e9  # Cycles writes ~1e10 where a ray escapes to the sky
@@ -44,9 +46,7 @@ def setup_cycles(width: int, height: int, samples: int, seed: int = 0, threads: 
     scene.render.resolution_y = height
     scene.render.resolution_percentage = 100
     scene.render.film_transparent = False
-    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.image_settings.exr_codec = "ZIP"
+    compat.set_multilayer_exr(scene.render.image_settings)
     layer = scene.view_layers[0]
     layer.use_pass_z = True
     layer.use_pass_object_index = True
@@ -78,12 +78,25 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
 
 
 def _read_exr(path: Path) -> dict[str, np.ndarray]:
+    """Every channel of every part of a (multipart) EXR by name. Up to 4.5 Blender writes a
+    multilayer EXR as one part; 5.0 writes one part per pass unless the file is interleaved."""
     import OpenImageIO as oiio
 
-    buf = oiio.ImageBuf(str(path))
-    names = list(buf.spec().channelnames)
-    data = np.asarray(buf.get_pixels(oiio.FLOAT), dtype=np.float32)
-    return {n: data[:, :, i] for i, n in enumerate(names)}
+    out: dict[str, np.ndarray] = {}
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"cannot read {path}: {oiio.geterror()}")
+    try:
+        subimage = 0
+        while inp.seek_subimage(subimage, 0):
+            names = list(inp.spec().channelnames)
+            data = np.asarray(inp.read_image(oiio.FLOAT), dtype=np.float32).reshape(
+                inp.spec().height, inp.spec().width, len(names))
+            out.update({n: data[:, :, i] for i, n in enumerate(names)})
+            subimage += 1
+    finally:
+        inp.close()
+    return out
 
 
 def _pass(ch: dict, suffixes: tuple[str, ...]) -> np.ndarray:
@@ -107,5 +120,5 @@ def render(cam_obj, c2w_opencv: np.ndarray) -> dict[str, np.ndarray]:
     rgb = np.stack([_pass(ch, (f"Combined.{c}",)) for c in "RGB"], -1)
     depth = _pass(ch, ("Depth.Z",)).copy()
     depth[~(depth < SKY_DEPTH)] = 0.0
-    index = np.rint(_pass(ch, ("IndexOB.X", "IndexOB.R"))).astype(np.int32)
+    index = np.rint(_pass(ch, ("IndexOB.X", "IndexOB.R", "Object Index.X"))).astype(np.int32)
     return {"rgb": linear_to_srgb(rgb).astype(np.float32), "linear": rgb, "depth": depth, "index": index}

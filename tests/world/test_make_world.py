@@ -1,6 +1,7 @@
 """The generator end to end at a tiny size (Cycles renders six 48x27 frames)."""
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +16,17 @@ from symdrive_core.world.points import read_points
 pytest.importorskip("bpy")
 pytestmark = [pytest.mark.blender, pytest.mark.slow]  # ~15-35 s: Blender start + Cycles
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "make_world.py"
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "scripts" / "make_world.py"
+
+
+def _env() -> dict[str, str]:
+    """The subprocess's environment: this checkout's ``symdrive_core`` first (an editable install
+    elsewhere, or none, would otherwise decide), then the inherited ``PYTHONPATH`` (which may
+    select the ``bpy`` under test)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    return env
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +35,7 @@ def package(tmp_path_factory):
     subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--width", "48", "--height", "27",
                     "--frames", "3", "--samples", "4", "--offsets", "1.0", "--lateral-every", "2",
                     "--holdout-every", "3", "--placements", "1", "--points", "3000", "--asset-splats", "500"],
-                   check=True, capture_output=True)
+                   check=True, capture_output=True, env=_env())
     return load_manifest(out)
 
 
@@ -39,6 +50,14 @@ def test_package_is_valid_and_complete(package):
     assert package.effects.sun_direction is not None and package.effects.sun_direction[2] < 0
     for rel in [f for e in gt["lateral"] for f in e["frames"].values()]:
         assert read_image(package.resolve(rel)).shape == (27, 48, 3)
+
+
+def test_package_was_rendered_by_this_blender(package):
+    """The generator runs as a subprocess with ``sys.executable``: it must find the same ``bpy``
+    as this process (so a test run against a given Blender renders with that Blender)."""
+    import bpy
+
+    assert package.ground_truth["generator"]["blender"] == bpy.app.version_string
 
 
 def test_depth_is_opencv_z_of_the_road(package):
