@@ -25,7 +25,7 @@ _NAME_RE = re.compile(NAME_PATTERN)
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 PATH_MAX = 4096
 EXTERNAL_HINT = ("pass --allow-external-assets to read files outside the package (a package exported "
-                 "from Blender without --copy-assets names its assets by absolute path)")
+                 "from Blender without --copy-assets names its assets where they are, outside it)")
 
 
 def _fail(path, where: str | None, message: str):
