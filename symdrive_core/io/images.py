@@ -16,6 +16,12 @@ from . import check_regular
 from .atomic import atomic_path
 
 
+def _first_line(message: str) -> str:
+    """OpenImageIO's messages run over several lines; the first says what is wrong."""
+    lines = [ln.strip() for ln in (message or "").splitlines() if ln.strip()]
+    return lines[0] if lines else "unknown error"
+
+
 def _oiio():
     import OpenImageIO as oiio  # imported lazily: the add-on's numpy-only modules never need it
     return oiio
@@ -36,7 +42,7 @@ def image_size(path: str | os.PathLike, field: str | None = None) -> tuple[int, 
     oiio = _oiio()
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise InputError(path, f"cannot read image: {oiio.geterror() or 'unknown format'}", field)
+        raise InputError(path, f"cannot read image: {_first_line(oiio.geterror())}", field)
     try:
         spec = inp.spec()
         width, height, channels = int(spec.width), int(spec.height), int(spec.nchannels)
@@ -59,10 +65,10 @@ def read_image(path: str | os.PathLike, *, channels: int | None = None) -> np.nd
     image_size(path)  # a regular file of a sane size, checked before any pixel is allocated
     buf = oiio.ImageBuf(str(path))
     if buf.has_error:
-        raise InputError(path, f"cannot read image: {buf.geterror()}")
+        raise InputError(path, f"cannot read image: {_first_line(buf.geterror())}")
     pixels = buf.get_pixels(oiio.FLOAT)
     if pixels is None or buf.has_error:
-        raise InputError(path, f"cannot read image: {buf.geterror()}")
+        raise InputError(path, f"cannot read image: {_first_line(buf.geterror())}")
     img = np.asarray(pixels, dtype=np.float32)
     if img.ndim == 2:
         img = img[:, :, None]

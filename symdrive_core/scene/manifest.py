@@ -149,7 +149,7 @@ class Manifest:
         refused in every case."""
         if rel is None:
             return None
-        return resolve_inside(self.root, rel, where or self.field_of(rel), self.path or self.root,
+        return resolve_inside(self.root, rel, where or (lambda: self.field_of(rel)), self.path or self.root,
                               allow_external=self.allow_external, also=self.read_roots)
 
     def allow_reads_from(self, folder: str | os.PathLike) -> None:

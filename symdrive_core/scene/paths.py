@@ -14,7 +14,7 @@ import os
 import re
 import stat
 from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import Iterable
+from typing import Callable, Iterable
 
 from ..errors import InputError
 
@@ -25,7 +25,7 @@ _NAME_RE = re.compile(NAME_PATTERN)
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 PATH_MAX = 4096
 EXTERNAL_HINT = ("pass --allow-external-assets to read files outside the package (a package exported "
-                 "from Blender without --copy-assets names the assets where they lie)")
+                 "from Blender without --copy-assets names its assets where they are, outside it)")
 
 
 def _fail(path, where: str | None, message: str):
@@ -109,24 +109,28 @@ def is_inside(candidate, root) -> bool:
     return real(candidate).is_relative_to(real(root))
 
 
-def resolve_inside(root, rel: str, where: str, path=None, *, allow_external: bool = False,
+def resolve_inside(root, rel: str, where: str | Callable[[], str], path=None, *, allow_external: bool = False,
                    also: Iterable = ()) -> Path:
     """``root / rel``, refused unless it lies inside ``root`` or one of the folders ``also`` once
     symlinks are resolved (``allow_external`` lifts that). Anything that exists but is neither a
     regular file nor a folder (a FIFO, a device, a socket) is refused in every case: reading one
-    can block forever or never end."""
-    check_path_text(rel, where, path)
+    can block forever or never end. ``where`` (the field, for messages) may be a function,
+    called only when there is something to report."""
+    def field() -> str:
+        return where() if callable(where) else where
+
+    if not isinstance(rel, str) or not rel or len(rel) > PATH_MAX or _CONTROL.search(rel):
+        check_path_text(rel, field(), path)
     full = Path(root) / rel
     if not allow_external:
-        roots = [root, *also]
-        if not any(is_inside(full, r) for r in roots):
+        if not any(is_inside(full, r) for r in (root, *also)):
             kind = ("an absolute path outside the package" if is_absolute_text(rel)
                     else "outside the package" if escapes(rel) else "a link that leads outside the package")
-            _fail(path, where, f"{rel!r} is {kind}; {EXTERNAL_HINT}")
+            _fail(path, field(), f"{rel!r} is {kind}; {EXTERNAL_HINT}")
     try:
         st = os.stat(full)
     except OSError:
         return full  # missing: the reader (or check_files) says so
     if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
-        _fail(path, where, f"{rel!r} is not a regular file (a FIFO, device or socket)")
+        _fail(path, field(), f"{rel!r} is not a regular file (a FIFO, device or socket)")
     return full
