@@ -20,7 +20,7 @@ from ..errors import InputError
 
 NAME_MAX = 128
 # The same rule as the JSON Schema's pattern for names (manifest.schema.json).
-NAME_PATTERN = r"^(?!\.)(?!.*\.\.)[^/\\\x00-\x1f\x7f-\x9f]{1,128}$"
+NAME_PATTERN = r"^(?!\.)(?!.*\.\.)[^/\\\x00-\x1f\x7f-\x9f]{1,128}(?![\s\S])"  # not "$": it admits a final "\n"
 _NAME_RE = re.compile(NAME_PATTERN)
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 PATH_MAX = 4096
