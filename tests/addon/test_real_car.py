@@ -1,6 +1,7 @@
-"""A car the project did not make (Kenney's CC0 toy SUV, a textured multi-node GLB, +Y up and
-0.875 m long) goes the whole way: imported with the size warning, fitted to car size with one
-action, exported as a mesh-only actor, and rendered and masked by ``symdrive run``."""
+"""Cars the project did not make go the whole way: imported with the size warning, fitted to car
+size with one action, exported as a mesh-only actor, and rendered and masked by ``symdrive run``.
+Kenney's CC0 toy SUV is a textured multi-node GLB, +Y up and 0.875 m long; the WTFPL voxel car is
+a MagicaVoxel OBJ, +Y up, 27 units long, naming a material library it does not ship."""
 
 import json
 from pathlib import Path
@@ -12,10 +13,15 @@ from tests.addon.scenes import add_camera
 from tests.conftest import random_gaussians
 
 pytestmark = pytest.mark.blender
-KENNEY_SUV = Path(__file__).resolve().parents[1] / "data" / "meshes" / "kenney_suv" / "vehicle-suv.glb"
+MESHES = Path(__file__).resolve().parents[1] / "data" / "meshes"
+CARS = {  # file, import options (the user's choices in the import dialog), length before fitting
+    "glb": (MESHES / "kenney_suv" / "vehicle-suv.glb", {}, (0.5, 1.5)),
+    "obj": (MESHES / "voxel_car" / "car.obj", {"up_axis": "Y", "forward_axis": "Z"}, (20.0, 40.0)),
+}
 
 
-def test_a_downloaded_glb_car_imports_fits_exports_and_renders(blender, tmp_path, capsys):
+@pytest.mark.parametrize("kind", sorted(CARS))
+def test_a_downloaded_car_imports_fits_exports_and_renders(blender, tmp_path, capsys, kind):
     pytest.importorskip("torch")  # the backend run at the end
     from symdrive_core.cli import main
     from symdrive_core.io.images import read_image, read_mask
@@ -30,14 +36,15 @@ def test_a_downloaded_glb_car_imports_fits_exports_and_renders(blender, tmp_path
     blender.ops.symdrive.import_splats(filepath=str(bg))
 
     scene.cursor.location = (9.0, 0.5, 0.0)
-    assert blender.ops.symdrive.import_vehicle(filepath=str(KENNEY_SUV)) == {"FINISHED"}
+    path, options, (lo, hi) = CARS[kind]
+    assert blender.ops.symdrive.import_vehicle(filepath=str(path), **options) == {"FINISHED"}
     root = blender.context.active_object
     said = capsys.readouterr()
-    assert "Not car-sized" in said.out + said.err and root.symdrive.wlh[1] < 1.0  # warned: a toy
+    assert "Not car-sized" in said.out + said.err and lo < root.symdrive.wlh[1] < hi  # warned
     assert blender.ops.symdrive.fit_vehicle_size(length=4.6) == {"FINISHED"}  # the user's one action
     w, l, h = root.symdrive.wlh
-    # Upright and car-sized (a toy: wide for its length), not on end or on its side.
-    assert l == pytest.approx(4.6, rel=1e-3) and 1.2 < w < 3.0 and 1.0 < h < 3.0 and h < l
+    # Upright and car-sized (toys: wide and tall for their length), not on end or on its side.
+    assert l == pytest.approx(4.6, rel=1e-3) and 1.2 < w < 4.0 and 1.0 < h < 3.5 and h < l and w < l
 
     cam = add_camera(blender, shift=(0.0, 0.0))
     cam.location = (0.0, 0.5, 1.6)
