@@ -47,7 +47,7 @@ $(VENV52)/.installed: pyproject.toml
 	$(PYTHON313) -m venv $(VENV52)
 	$(VENV52)/bin/python scripts/build_addon --blender-requirements > $(VENV52)/blender-requirements.txt
 	$(VENV52)/bin/python -m pip install -r $(VENV52)/blender-requirements.txt "bpy>=5.2,<5.3" \
-		pytest hypothesis jsonschema plyfile OpenImageIO
+		pytest hypothesis jsonschema plyfile OpenImageIO trimesh
 	touch $@
 
 test-addon-5.2: $(VENV52)/.installed
