@@ -19,8 +19,14 @@ from typing import Callable, Iterable
 from ..errors import InputError
 
 NAME_MAX = 128
-# The same rule as the JSON Schema's pattern for names (manifest.schema.json).
-NAME_PATTERN = r"^(?!\.)(?!.*\.\.)[^/\\\x00-\x1f\x7f-\x9f]{1,128}(?![\s\S])"  # not "$": it admits a final "\n"
+# The same rule as the JSON Schema's pattern for names (manifest.schema.json). The first
+# look-ahead refuses control characters anywhere: in Python's re (which jsonschema uses) ``$``
+# also matches before a final newline.
+NO_CONTROL = r"(?![\s\S]*[\x00-\x1f\x7f-\x9f])"
+NAME_PATTERN = r"^" + NO_CONTROL + r"(?!\.)(?![\s\S]*\.\.)[^/\\]{1,128}$"
+PATH_PATTERN = r"^" + NO_CONTROL + r"[\s\S]{1,4096}$"
+OUTPUT_PATTERN = (r"^" + NO_CONTROL + r"(?![/\\])(?![A-Za-z]:)(?![\s\S]*(^|[/\\])\.\.([/\\]|$))"
+                  r"(?!(\.[/\\]+)*\.?[/\\]*$)[\s\S]{1,4096}$")
 _NAME_RE = re.compile(NAME_PATTERN)
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 PATH_MAX = 4096

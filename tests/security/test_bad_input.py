@@ -262,3 +262,26 @@ def test_numbers_json_cannot_write_are_refused(make_package, capsys):
     manifest.write_text(text)
     _one_line_naming(*_cli(capsys, "validate", manifest), str(manifest), "actors[0].wlh", "finite")
     assert np.isinf(json.loads(text)["actors"][0]["wlh"][1])
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(parts=st.lists(st.sampled_from(["out", "a", ".", "..", "/", "\\", "\x00", "\n", "C:", "é", " ", "..x"]),
+                      min_size=0, max_size=7))
+def test_schema_and_loader_agree_on_every_output(tmp_path, parts):
+    from symdrive_core.scene import check_relative
+
+    value = "".join(parts)
+    try:
+        jsonschema.validate(value, _SCHEMA["properties"]["output"])
+        schema_ok = True
+    except jsonschema.ValidationError:
+        schema_ok = False
+    try:
+        check_relative(value, "output")
+    except InputError:
+        assert not schema_ok, value
+        return
+    assert schema_ok, value
+    root = tmp_path / "pkg"
+    target = Path(os.path.normpath(root / value))
+    assert target.is_relative_to(root) and target != root, value
