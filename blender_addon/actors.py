@@ -38,7 +38,8 @@ def actor_of(obj: bpy.types.Object | None) -> bpy.types.Object | None:
 
 
 def unique_actor_id(scene: bpy.types.Scene, wanted: str) -> str:
-    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", wanted).strip("_") or "vehicle"
+    # A plain name, as the manifest requires (no leading dot, no "..": ids become file names).
+    base = re.sub(r"\.{2,}", ".", re.sub(r"[^A-Za-z0-9_.-]+", "_", wanted)).strip("_.")[:100] or "vehicle"
     taken = {ob.symdrive.actor_id for ob in scene.objects if ob.symdrive.role == "ACTOR"}
     if base not in taken:
         return base

@@ -99,7 +99,9 @@ def read_obj(path: str | os.PathLike) -> TriMesh:
                 uvs.append([float(v) for v in parts[1:3]])
             elif parts[0] == "mtllib":
                 mtl = path.parent / " ".join(parts[1:])
-                if mtl.exists():
+                # Beside the OBJ only (a name in a downloaded file is data, not a path to follow),
+                # and a regular file; a missing library leaves the default colour, as in Blender.
+                if mtl.is_file() and mtl.resolve().is_relative_to(path.parent.resolve()):
                     mats.update(_read_mtl(mtl))
             elif parts[0] == "usemtl":
                 name = " ".join(parts[1:])

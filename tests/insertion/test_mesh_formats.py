@@ -187,3 +187,20 @@ def test_asset_folder_with_only_a_glb(tmp_path):
     a = load_vehicle_asset(tmp_path, n_samples=300)
     assert a.source.name == "mesh.glb" and len(a.gaussians) == 300
     np.testing.assert_allclose(np.ptp(a.gaussians.means, axis=0), [1.8, 4.5, 1.5], atol=0.05)
+
+
+def test_an_obj_material_library_outside_its_folder_is_not_read(tmp_path):
+    """``mtllib`` in a downloaded OBJ is data: a library beside the file is read, one that climbs
+    out of its folder is not (the mesh keeps the default colour)."""
+    from symdrive_core.insertion.mesh_to_splats import read_obj
+
+    (tmp_path / "pkg").mkdir()
+    for where, name in ((tmp_path, "outside.mtl"), (tmp_path / "pkg", "beside.mtl")):
+        (where / name).write_text("newmtl red\nKd 1 0 0\n")
+    body = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n"
+    (tmp_path / "pkg" / "out.obj").write_text("mtllib ../outside.mtl\n" + body)
+    (tmp_path / "pkg" / "in.obj").write_text("mtllib beside.mtl\n" + body)
+    inside = read_obj(tmp_path / "pkg" / "in.obj")
+    outside = read_obj(tmp_path / "pkg" / "out.obj")
+    np.testing.assert_allclose(inside.materials[0]["kd"], [1.0, 0.0, 0.0])
+    assert not np.allclose(outside.materials[0]["kd"], [1.0, 0.0, 0.0])  # the default colour
