@@ -14,18 +14,12 @@ import bpy
 import numpy as np
 
 from . import splat_display
-from .core import ply
+from .core import conventions, ply
 
 
 def file_sha256(path: str | Path) -> str:
     with open(path, "rb") as f:
         return hashlib.file_digest(f, "sha256").hexdigest()
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """3DGS colours are fitted to sRGB photos; Blender colour attributes are scene-linear."""
-    c = np.clip(c, 0.0, None)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 def display_subset(count: int, max_points: int) -> np.ndarray | None:
@@ -43,7 +37,7 @@ def build_splat_mesh(name: str, gaussians, index: np.ndarray | None = None) -> b
     mesh.vertices.foreach_set("co", np.ascontiguousarray(g.means, dtype=np.float32).ravel())
     opacity = g.opacities
     rgba = np.empty((n, 4), dtype=np.float32)
-    rgba[:, :3] = srgb_to_linear(g.base_colors)
+    rgba[:, :3] = conventions.srgb_to_linear(g.base_colors)  # 3DGS colours are sRGB; attributes linear
     rgba[:, 3] = opacity
     attrs = mesh.attributes
     attrs.new(splat_display.OPACITY_ATTRIBUTE, "FLOAT", "POINT").data.foreach_set("value", opacity)

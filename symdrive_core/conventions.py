@@ -159,3 +159,21 @@ def vehicle_box_corners(wlh) -> np.ndarray:
     w, l, h = (float(v) for v in wlh)
     sx, sy, sz = l / 2.0, w / 2.0, h / 2.0
     return np.array([[x, y, z] for x in (-sx, sx) for y in (-sy, sy) for z in (-sz, sz)])
+
+
+# ---------------------------------------------------------------- colour
+# 3DGS colours and images are sRGB-encoded; lighting, shading and Blender colour attributes are
+# linear. The IEC 61966-2-1 curve, in float64.
+
+
+def srgb_to_linear(x) -> np.ndarray:
+    """sRGB-encoded values to linear light. Negative values clip to 0; values above 1 (splat
+    colours can exceed it) follow the curve's power segment."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, None)
+    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
+
+
+def linear_to_srgb(x) -> np.ndarray:
+    """Linear light in [0, 1] (clipped) to sRGB-encoded values."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+from symdrive_core import conventions
 from symdrive_core.io.atomic import write_text_atomic
 from symdrive_core.io.ply import write_splats
 from symdrive_core.world.obj import write_obj
 from symdrive_core.world.sampling import sample_surface, surface_splats, surfel_spacing, triangle_areas
 
 from .meshdata import object_triangles
-from .render import linear_to_srgb
 
 
 def export_car(obj, folder: Path, n_splats: int, seed: int) -> dict:
@@ -35,7 +35,7 @@ def export_car(obj, folder: Path, n_splats: int, seed: int) -> dict:
     v, tris, albedo = object_triangles(obj, world=False)
     pts, normals, tri = sample_surface(v, tris, n_splats, np.random.default_rng(seed))
     spacing = surfel_spacing(float(triangle_areas(v, tris).sum()), n_splats)
-    splats = surface_splats(pts, normals, linear_to_srgb(albedo[tri]), 1.2 * spacing)
+    splats = surface_splats(pts, normals, conventions.linear_to_srgb(albedo[tri]), 1.2 * spacing)
     write_splats(folder / "splats.ply", splats)
 
     wlh = [round(float(x), 4) for x in obj["wlh"]]

@@ -72,11 +72,6 @@ def camera_K(cam_obj) -> np.ndarray:
         cam.sensor_fit, cam.shift_x, cam.shift_y, scene.render.pixel_aspect_x, scene.render.pixel_aspect_y)
 
 
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
 def _read_exr(path: Path) -> dict[str, np.ndarray]:
     """Every channel of every part of a (multipart) EXR by name. Up to 4.5 Blender writes a
     multilayer EXR as one part; 5.0 writes one part per pass unless the file is interleaved."""
@@ -121,4 +116,4 @@ def render(cam_obj, c2w_opencv: np.ndarray) -> dict[str, np.ndarray]:
     depth = _pass(ch, ("Depth.Z",)).copy()
     depth[~(depth < SKY_DEPTH)] = 0.0
     index = np.rint(_pass(ch, ("IndexOB.X", "IndexOB.R", "Object Index.X"))).astype(np.int32)
-    return {"rgb": linear_to_srgb(rgb).astype(np.float32), "linear": rgb, "depth": depth, "index": index}
+    return {"rgb": conventions.linear_to_srgb(rgb).astype(np.float32), "linear": rgb, "depth": depth, "index": index}

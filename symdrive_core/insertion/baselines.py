@@ -10,22 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..conventions import linear_to_srgb, srgb_to_linear
 from .shadow import dilate
 
 _RGB_TO_LMS = np.array([[0.3811, 0.5783, 0.0402], [0.1967, 0.7244, 0.0782], [0.0241, 0.1288, 0.8444]])
 _LMS_TO_LAB = np.diag([1 / np.sqrt(3), 1 / np.sqrt(6), 1 / np.sqrt(2)]) @ np.array(
     [[1, 1, 1], [1, 1, -2], [1, -1, 0]], dtype=np.float64)
 _EPS = 1e-4
-
-
-def srgb_to_linear(x):
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(x):
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
 def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:

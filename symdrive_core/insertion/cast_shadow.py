@@ -21,12 +21,12 @@ import numpy as np
 import torch
 
 from .. import conventions
+from ..conventions import linear_to_srgb, srgb_to_linear
 from ..gaussians import Gaussians
 from ..scene import Pose
 from ..splat.kernels import ALPHA_MAX
 from ..splat.projection import quat_to_rotmat
 from ..splat.rasterize import RasterizePixels, bin_gaussians
-from .baselines import linear_to_srgb, srgb_to_linear
 from .composite import InsertionView
 from .place import place
 from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..conventions import linear_to_srgb, srgb_to_linear
 from ..errors import InputError
 from ..gaussians import Gaussians
 from ..world.sampling import sample_surface, surface_splats, surfel_spacing, triangle_areas
@@ -45,16 +46,6 @@ class TriMesh:
     # {"name", "kd" (linear), "texture" [H,W,3] | None}; trimesh-read meshes add "multiply": True,
     # "vertex_colored" and "vertex_linear" (the glTF rule, see the module docstring)
     materials: list[dict] = field(default_factory=list)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
 
 
 def _read_mtl(path: Path) -> dict[str, dict]:

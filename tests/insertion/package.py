@@ -78,7 +78,7 @@ def write_package(root: Path, sun=None) -> tuple[Path, Gaussians]:
     empty = view.render_numpy(invisible)[0]
     shadow = None
     if sun is not None:
-        from symdrive_core.insertion.baselines import linear_to_srgb, srgb_to_linear
+        from symdrive_core.conventions import linear_to_srgb, srgb_to_linear
 
         shadow = box_shadow(view, pose, synthetic.WLH, sun) & (alpha < 0.5)
         truth = np.where(shadow[..., None], linear_to_srgb(SHADOW_RATIO * srgb_to_linear(truth)), truth)

@@ -3,11 +3,11 @@ import json
 import numpy as np
 import torch
 
+from symdrive_core.conventions import linear_to_srgb
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.insertion.assets import flip_forward, load_vehicle_asset
 from symdrive_core.insertion.mesh_to_splats import (
     TriMesh,
-    linear_to_srgb,
     mesh_to_splats,
     read_obj,
     sample_colors,

@@ -5,7 +5,8 @@ had. This pins the contract between the add-on's export and the core's mesh read
 import numpy as np
 import pytest
 
-from symdrive_core.insertion.mesh_to_splats import linear_to_srgb, mesh_to_splats, read_mesh
+from symdrive_core.conventions import linear_to_srgb
+from symdrive_core.insertion.mesh_to_splats import mesh_to_splats, read_mesh
 
 pytestmark = pytest.mark.blender
 

@@ -4,8 +4,8 @@ its geometry, the hard cases, and the darkening it applies."""
 import numpy as np
 import pytest
 
+from symdrive_core.conventions import srgb_to_linear
 from symdrive_core.gaussians import Gaussians, logit
-from symdrive_core.insertion.baselines import srgb_to_linear
 from symdrive_core.insertion.cast_shadow import darken, occlusion_image, shadow_map
 
 from . import synthetic

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from symdrive_core.conventions import linear_to_srgb
 from symdrive_core.errors import InputError
 from symdrive_core.insertion.assets import load_vehicle_asset
 from symdrive_core.insertion.mesh_to_splats import (
-    linear_to_srgb,
     mesh_to_splats,
     read_mesh,
     read_obj,
