@@ -43,13 +43,6 @@ class RunContext:
     shared: Shared
 
 
-def output_path(out: Path | OutputTree, kind: str, camera: str, frame: int, suffix: str = ".png",
-                actor: str | None = None) -> Path:
-    """The path of one per-frame output, inside ``out`` (see OutputTree.frame)."""
-    tree = out if isinstance(out, OutputTree) else OutputTree(out)
-    return tree.frame(kind, camera, frame, suffix, actor)
-
-
 def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: list[tuple[str, int]], device: str,
                   progress: bool = True) -> int:
     """Render (camera, frame) jobs whose outputs are missing; returns how many were rendered."""
@@ -60,7 +53,7 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: 
     done = 0
     casting = plan.stage("cast_shadow")
     for cam, fi in tqdm(jobs, desc="render", unit="frame", disable=not progress):
-        rgb_path = output_path(out, "render", cam, fi)
+        rgb_path = out.frame("render", cam, fi)
         if rgb_path.exists():
             continue
         if renderer is None:
@@ -71,10 +64,10 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: 
             frame = renderer.cast_shadows(cam, fi, frame, casters, manifest.effects.sun_direction,
                                           manifest.effects.shade)
         for actor_id, mask in frame.instance.items():
-            write_mask(output_path(out, "masks", cam, fi, actor=actor_id), mask)
+            write_mask(out.frame("masks", cam, fi, actor=actor_id), mask)
         if frame.shadow is not None:
-            write_mask(output_path(out, "shadows", cam, fi), frame.shadow)
-        write_image(output_path(out, "render", cam, fi, ".depth.exr"), frame.depth, dtype="float")
+            write_mask(out.frame("shadows", cam, fi), frame.shadow)
+        write_image(out.frame("render", cam, fi, ".depth.exr"), frame.depth, dtype="float")
         write_image(rgb_path, frame.rgb)  # written last: its presence marks the frame complete
         done += 1
     return done
