@@ -118,7 +118,7 @@ def add_commands(sub) -> None:
     p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
                    help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
     p.add_argument("--grad-accum", type=int, help="flux: gradient accumulation steps (default 1)")
-    p.add_argument("--warmup", type=int, help="flux: learning-rate warm-up steps (default 100)")
+    p.add_argument("--warmup", type=int, help="learning-rate warm-up steps (default 100)")
     p.add_argument("--mixed-precision", choices=["auto", "no", "bf16", "fp16"],
                    help="flux: auto (default) is bf16 on CUDA, float32 on the CPU")
     p.add_argument("--no-gradient-checkpointing", action="store_true", help="flux: keep all activations")
@@ -216,7 +216,7 @@ def _train(args) -> int:
     if args.backend == "flux":
         return _train_flux(args)
     flux_only = ("flux_transformer", "flux_vae", "prompt", "rank", "lora_alpha", "lora_targets", "grad_accum",
-                 "warmup", "mixed_precision")
+                 "mixed_precision")
     given = [n for n in flux_only if getattr(args, n) is not None] + (["no_gradient_checkpointing"]
                                                                        if args.no_gradient_checkpointing else [])
     if given:
@@ -226,7 +226,7 @@ def _train(args) -> int:
 
     cfg = TrainConfig()
     names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
-    for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init"):
+    for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init", "warmup"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
     record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation)
