@@ -105,8 +105,34 @@ def add_commands(sub) -> None:
         ("--init", str, "restorer weights to continue from (default: a fresh network)"),
     ):
         p.add_argument(flag, type=kind, help=text)
-    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.safetensors")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from OUT/checkpoint.safetensors (flux: OUT/flux_checkpoint.safetensors)")
+    # Flux.1-dev + LoRA (the paper's recipe; GPU): diffusion.flux_train, defaults in FluxTrainConfig
+    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
+                   help="builtin: the small UNet (CPU); flux: a LoRA on FLUX.1-dev (GPU, local weights)")
+    p.add_argument("--flux-transformer", help="flux: FLUX.1-dev transformer folder (diffusers layout)")
+    p.add_argument("--flux-vae", help="flux: FLUX.1-dev VAE folder (diffusers layout)")
+    p.add_argument("--prompt", help="flux: prompt-embedding .safetensors from `symdrive flux-prompt`")
+    p.add_argument("--rank", type=int, help="flux: LoRA rank (default 128, the paper's)")
+    p.add_argument("--lora-alpha", type=float, help="flux: LoRA alpha (default: the rank)")
+    p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
+                   help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
+    p.add_argument("--grad-accum", type=int, help="flux: gradient accumulation steps (default 1)")
+    p.add_argument("--warmup", type=int, help="learning-rate warm-up steps (default 100)")
+    p.add_argument("--mixed-precision", choices=["auto", "no", "bf16", "fp16"],
+                   help="flux: auto (default) is bf16 on CUDA, float32 on the CPU")
+    p.add_argument("--no-gradient-checkpointing", action="store_true", help="flux: keep all activations")
     p.set_defaults(func=_train)
+
+    p = sub.add_parser("flux-prompt", help="write the prompt-embedding file of --backend flux from local T5 / CLIP")
+    p.add_argument("--text-encoders", type=Path, required=True,
+                   help="folder with text_encoder/, tokenizer/ (CLIP) and text_encoder_2/, tokenizer_2/ (T5), "
+                        "as in FLUX.1-dev")
+    p.add_argument("--out", type=Path, required=True, help=".safetensors to write")
+    p.add_argument("--text", help="the prompt (default: diffusion.flux_prompt.DEFAULT_PROMPT)")
+    p.add_argument("--max-length", type=int, default=512, help="T5 tokens (default 512, FLUX.1-dev's)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.set_defaults(func=_flux_prompt)
 
     p = sub.add_parser("restore", help="restore lateral views auto-regressively (and evaluate / refine)")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -187,13 +213,62 @@ def _train(args) -> int:
     from ..cli import print_json
     from .train import TrainConfig, train_restorer
 
+    if args.backend == "flux":
+        return _train_flux(args)
+    flux_only = ("flux_transformer", "flux_vae", "prompt", "rank", "lora_alpha", "lora_targets", "grad_accum",
+                 "mixed_precision")
+    given = [n for n in flux_only if getattr(args, n) is not None] + (["no_gradient_checkpointing"]
+                                                                       if args.no_gradient_checkpointing else [])
+    if given:
+        from ..errors import InputError
+
+        raise InputError("train-restorer", "needs --backend flux", "--" + given[0].replace("_", "-"))
+
     cfg = TrainConfig()
     names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
-    for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init"):
+    for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init", "warmup"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
     record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "data")})
+    return 0
+
+
+def _train_flux(args) -> int:
+    from ..cli import print_json
+    from ..errors import InputError
+    from .flux_train import FluxTrainConfig, train_flux_lora
+
+    builtin_only = ("ema", "width", "t_max", "full_fraction", "output", "init")
+    for name in builtin_only:
+        if getattr(args, name) is not None:
+            raise InputError("train-restorer", "not used by --backend flux", "--" + name.replace("_", "-"))
+    cfg = FluxTrainConfig()
+    names = ("steps", "batch", "crop", "lr", "seed", "threads", "checkpoint_every", "rank", "warmup",
+             "grad_accum", "mixed_precision", "degraded_fraction")
+    for name in names:
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
+    if args.lora_alpha is not None:
+        cfg.alpha = args.lora_alpha
+    if args.lora_targets is not None:
+        cfg.targets = args.lora_targets
+    cfg.gradient_checkpointing = not args.no_gradient_checkpointing
+    for name in ("steps", "batch", "crop", "rank", "grad_accum", "checkpoint_every"):
+        if getattr(cfg, name) < 1:
+            raise InputError("train-restorer", f"must be at least 1, got {getattr(cfg, name)}", "--" + name.replace("_", "-"))
+    record = train_flux_lora(args.pairs, args.out, args.flux_transformer, args.flux_vae, args.prompt, cfg,
+                             resume=args.resume, command=args.invocation)
+    print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "seconds_per_step", "peak_gpu_memory_gib",
+                                       "data")})
+    return 0
+
+
+def _flux_prompt(args) -> int:
+    from .flux_prompt import DEFAULT_PROMPT, write_prompt_file
+
+    out = write_prompt_file(args.text_encoders, args.out, args.text or DEFAULT_PROMPT, args.max_length, args.device)
+    print(f"wrote {out}")
     return 0
 
 

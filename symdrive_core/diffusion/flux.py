@@ -74,8 +74,11 @@ class FluxRestorer:
         prompt_embeds: torch.Tensor,
         pooled_prompt_embeds: torch.Tensor,
         guidance: float = 3.5,
+        model=None,
     ):
         self.transformer = transformer
+        # the module called: ``transformer`` itself, or its multi-GPU wrapper while training
+        self.model = transformer if model is None else model
         self.latent = VAESpace(vae)
         p = next(transformer.parameters())
         self.prompt_embeds = prompt_embeds.reshape(1, -1, prompt_embeds.shape[-1]).to(p.device, p.dtype)
@@ -95,7 +98,7 @@ class FluxRestorer:
         guidance = None
         if self.transformer.config.guidance_embeds:
             guidance = torch.full((b,), self.guidance, device=p.device, dtype=p.dtype)
-        out = self.transformer(
+        out = self.model(
             hidden_states=tokens,
             encoder_hidden_states=txt,
             pooled_projections=self.pooled.expand(b, -1),
