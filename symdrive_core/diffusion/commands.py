@@ -155,6 +155,8 @@ def add_commands(sub) -> None:
     p.add_argument("--samples", type=int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         "times the work (default: 8 builtin, 1 flux)")
+    p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
+                   help="memory for one restorer evaluation; larger images run on overlapping tiles (default 4)")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument(
         "--evaluate",
@@ -300,7 +302,7 @@ def _restore(args) -> int:
     )
     steps, n_start, samples = SAMPLER_DEFAULTS[args.backend]
     sampler = SamplerConfig(steps=args.steps or steps, n_start=n_start if args.n_start is None else args.n_start,
-                            seed=args.seed, samples=args.samples or samples)
+                            seed=args.seed, samples=args.samples or samples, max_memory_gib=args.max_memory)
     if args.evaluate:
         metrics = _evaluate(args, manifest, gaussians, restorer, sampler)
         write_text_atomic(args.out / "metrics.json", json.dumps(metrics, indent=1) + "\n")

@@ -51,12 +51,17 @@ def harmonize(
     jump_length: int = 0,
     resamples: int = 1,
     samples: int = 1,
+    max_memory_gib: float | None = None,
+    tile: int = 256,
+    tile_overlap: int = 32,
 ) -> np.ndarray:
     """Harmonize ``image`` [H, W, 3] in [0, 1] inside ``region`` [H, W] (bool); a new array.
 
     ``n_start`` > 0 starts from the inserted render noised to that step, which keeps the
     vehicle's shape while re-drawing its shading. ``samples`` > 1 averages that many
     independent harmonizations (one batch), as ``SamplerConfig.samples`` does for restoration.
+    ``max_memory_gib`` bounds one denoiser evaluation: beyond it samples, then overlapping tiles,
+    are evaluated in turn (:mod:`.tiling`); the reset and the schedule stay global.
     """
     image = np.asarray(image)
     region = np.asarray(region, dtype=bool)
@@ -82,12 +87,17 @@ def harmonize(
         return torch.where(m, z, known)
 
     z = flow.start_state(x0, ts, n_start, g)
+    velocity = restorer.velocity
+    if max_memory_gib is not None:
+        from .tiling import TileOptions, tiled_velocity
+
+        velocity = tiled_velocity(restorer, z.shape, TileOptions(max_memory_gib, tile, tile_overlap))
     for i, j in repaint_moves(steps, n_start, jump_length, resamples):
         if j < i:
             z = flow.renoise(z, float(ts[i]), float(ts[j]), g)
             continue
         t, s = float(ts[i]), float(ts[j])
-        z = z + (s - t) * restorer.velocity(z, torch.full((z.shape[0],), t, dtype=z.dtype), x0, x0)
+        z = z + (s - t) * velocity(z, torch.full((z.shape[0],), t, dtype=z.dtype), x0, x0)
         z = reset(z, j)
     out = lat.decode(z).mean(dim=0).permute(1, 2, 0).cpu().numpy()
     result = image.copy()

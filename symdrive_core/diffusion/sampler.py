@@ -23,6 +23,16 @@ class SamplerConfig:
     # Average of this many independent samples (one batch): an estimate of the posterior mean,
     # which is what PSNR rewards, at up to this many times the cost. 1 is the paper's single sample.
     samples: int = 1
+    # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
+    # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
+    max_memory_gib: float | None = None
+    tile: int = 256
+    tile_overlap: int = 32
+
+    def tiling(self):
+        from .tiling import TileOptions
+
+        return TileOptions(max_memory_gib=self.max_memory_gib, tile=self.tile, overlap=self.tile_overlap)
 
 
 DEFAULT = SamplerConfig()
@@ -65,6 +75,11 @@ def restore_image(
     if k > 1:
         zl, zr, z0 = (x.repeat_interleave(k, dim=0) for x in (zl, zr, z0))
     z = flow.start_state(z0, ts, config.n_start, g)
-    z = flow.euler(lambda zt, t: restorer.velocity(zt, t, zl, zr), z, ts, start=config.n_start)
+    velocity = restorer.velocity
+    if config.max_memory_gib is not None:
+        from .tiling import tiled_velocity
+
+        velocity = tiled_velocity(restorer, z.shape, config.tiling())
+    z = flow.euler(lambda zt, t: velocity(zt, t, zl, zr), z, ts, start=config.n_start)
     out = lat.decode(z)
     return out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out

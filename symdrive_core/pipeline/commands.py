@@ -23,6 +23,8 @@ def add_commands(sub) -> None:
     p.add_argument("--no-refine", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    p.add_argument("--max-memory", type=float, metavar="GiB",
+                   help="memory for one restorer evaluation; larger images run on tiles (default 4)")
     add_external_assets_option(p)
     p.set_defaults(func=_run)
 
@@ -75,10 +77,12 @@ def _plan(args) -> int:
 def _run(args) -> int:
     from .plan import PlanOptions
     from .run import run_scene
+    from .stages import StageOptions
 
+    stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
     report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
                        device=args.device, progress=not args.quiet, force=args.force,
-                       allow_external=args.allow_external_assets)
+                       allow_external=args.allow_external_assets, stage_options=stage_options)
     for s in report["stages"]:
         took = f" ({s['seconds']:.1f} s)" if "seconds" in s else ""
         print(f"{'ran ' if s['ran'] else 'skip'} {s['name']}: {s['reason']}{took}")

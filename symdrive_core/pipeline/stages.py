@@ -36,6 +36,9 @@ class StageOptions:
     finetune_steps: int = 300
     insertion_train_views: int = 6
     seed: int = 0
+    # GiB one restorer evaluation may use; beyond it samples, then overlapping tiles, run in turn
+    # (diffusion.tiling). Fixed, not read from the machine, so the run's cache key stays put.
+    max_memory_gib: float | None = 4.0
 
 
 @dataclass
@@ -66,7 +69,8 @@ def restorer(ctx):
 def _sampler(opts: StageOptions):
     from ..diffusion.sampler import SamplerConfig
 
-    return SamplerConfig(steps=opts.sampler_steps, n_start=opts.n_start, seed=opts.seed, samples=opts.samples)
+    return SamplerConfig(steps=opts.sampler_steps, n_start=opts.n_start, seed=opts.seed, samples=opts.samples,
+                         max_memory_gib=opts.max_memory_gib)
 
 
 def _has_lateral_truth(manifest) -> bool:
@@ -178,7 +182,7 @@ def _harmonizer(ctx):
 
     o = ctx.options
     return restorer_harmonizer(restorer(ctx), steps=o.harmonize_steps, start_fraction=o.harmonize_start,
-                               samples=o.harmonize_samples, seed=o.seed)
+                               samples=o.harmonize_samples, seed=o.seed, max_memory_gib=o.max_memory_gib)
 
 
 def harmonize_stage(ctx) -> dict:
