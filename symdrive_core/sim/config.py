@@ -26,6 +26,12 @@ class SimConfig:
     max_brake: float = 8.0
     max_steer: float = 0.6
     max_speed: float = 40.0  # m/s; the model clamps the speed to [0, max_speed]
+    # Action space: "accel_steer" = [acceleration m/s^2, steering rad]; "waypoint" = [x, y, speed]:
+    # a target point in the ego frame (metres from the box centre, x forward, y left) and a target
+    # speed in [0, max_speed] m/s, turned into acceleration and steering (clipped to the limits
+    # above) by pure pursuit and a proportional speed controller with this gain (1/s).
+    action: str = "accel_steer"
+    waypoint_speed_gain: float = 2.0
     # Road: without ground_truth.road, a corridor this wide each side of the recorded path.
     corridor_half_width_m: float = 3.5
     # Off-road when any footprint corner lies this far beyond the road's edge.

@@ -9,9 +9,17 @@ Observation (a dict):
   offset from the lane's middle m (positive = left), lane index from the right, progress along
   the route m]``.
 
-Action: ``[acceleration m/s^2, front-wheel steering rad]`` through the kinematic bicycle model
-(:mod:`.bicycle`) with the limits of :class:`.config.SimConfig`; a NaN or out-of-range action
-ends the episode with reason ``invalid_action``.
+Action (``config.action``):
+
+* ``"accel_steer"`` (default): ``[acceleration m/s^2, front-wheel steering rad]`` through the
+  kinematic bicycle model (:mod:`.bicycle`) with the limits of :class:`.config.SimConfig`;
+* ``"waypoint"``: ``[x, y, speed]``, a target point in the ego frame (metres from the ego box's
+  centre, x forward, y left) and a target speed (m/s, in [0, max_speed]); the built-in low-level
+  controller (:func:`.bicycle.waypoint_control`: pure pursuit for the steering, the same function
+  the built-in agents steer with, and proportional speed control) turns it into acceleration and
+  steering, clipped to the same limits, for the same bicycle model.
+
+A NaN or out-of-range action ends the episode with reason ``invalid_action``.
 
 The ego: at frame 0 the reference camera (the package's ``ground_truth.camera`` or its first)
 gives the ego pose: its ground point moved back ``camera_ahead_m`` along the recorded heading,
@@ -33,7 +41,7 @@ from gymnasium import spaces
 from .. import conventions
 from ..scene import Manifest, load_manifest
 from . import episode as ep
-from .bicycle import EgoState, step
+from .bicycle import EgoState, step, waypoint_control
 from .config import SimConfig
 from .road import Route, drivable_area
 from .traffic import ReplayTraffic
@@ -94,8 +102,14 @@ class SymDriveEnv(gym.Env):
         self.traffic = self._make_traffic()
         self._renderer = None
         limits = self.action_limits
-        self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
-                                       np.array([limits[0][1], limits[1][1]], dtype=np.float32))
+        if cfg.action == "accel_steer":
+            self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
+                                           np.array([limits[0][1], limits[1][1]], dtype=np.float32))
+        elif cfg.action == "waypoint":
+            self.action_space = spaces.Box(np.array([-np.inf, -np.inf, 0.0], dtype=np.float32),
+                                           np.array([np.inf, np.inf, cfg.max_speed], dtype=np.float32))
+        else:
+            raise ValueError(f"action: expected 'accel_steer' or 'waypoint', got {cfg.action!r}")
         obs = {"state": spaces.Box(-np.inf, np.inf, (6,), np.float32)}
         if cfg.render:
             obs["images"] = spaces.Dict({c.name: spaces.Box(0, 255, (*self.image_size(c)[::-1], 3), np.uint8)
@@ -174,10 +188,18 @@ class SymDriveEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.end_reason is not None:
             raise RuntimeError(f"the episode has ended ({self.end_reason}); call reset()")
-        problem = ep.check_action(action, self.action_limits)
-        if problem is not None:
-            return self.end(ep.INVALID_ACTION, problem)
-        a, delta = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
+        if self.config.action == "waypoint":
+            problem = ep.check_waypoint(action, self.config.max_speed)
+            if problem is not None:
+                return self.end(ep.INVALID_ACTION, problem)
+            x, y, v = (float(u) for u in np.asarray(action, dtype=np.float64).reshape(-1))
+            a, delta = waypoint_control(self.ego, (x, y), v, self.config.wheelbase_m,
+                                        self.config.waypoint_speed_gain, self.action_limits)
+        else:
+            problem = ep.check_action(action, self.action_limits)
+            if problem is not None:
+                return self.end(ep.INVALID_ACTION, problem)
+            a, delta = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
         t0 = time.perf_counter()
         before = self.route.progress(self.ego.xy)
         self.ego = step(self.ego, a, delta, self.dt, self.config.wheelbase_m, self.config.max_speed)
