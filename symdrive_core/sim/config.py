@@ -45,6 +45,19 @@ class SimConfig:
     cameras: list[str] | None = None  # None = every camera of the package
     image_size: tuple[int, int] | None = None  # (width, height); None = the package's own
     device: str = "cpu"
+    # Online restoration of off-path views (see restore.py): when the ego is more than
+    # restore_threshold_m sideways of the recorded path, each camera's background goes through the
+    # restorer, auto-regressively (step restore_ar_step_m) from the nearest recorded frame, cached
+    # per (frame, camera, offset rounded to restore_offset_round_m). Sampler: the built-in
+    # restorer's steps and start (a single Euler step), one sample.
+    restore: bool = False
+    restore_threshold_m: float = 0.5
+    restore_offset_round_m: float = 0.25
+    restore_ar_step_m: float = 0.5
+    restore_steps: int = 5
+    restore_n_start: int = 4
+    restore_samples: int = 1
+    restore_seed: int = 0
     # Traffic: "replay" keeps the package's actors on their recorded poses; "sumo" drives
     # vehicles with SUMO/TraCI around the ego.
     traffic: str = "replay"

@@ -101,6 +101,11 @@ class SymDriveEnv(gym.Env):
 
         self.traffic = self._make_traffic()
         self._renderer = None
+        self.restorer = None
+        if cfg.restore and cfg.render:
+            from .restore import OnlineRestorer
+
+            self.restorer = OnlineRestorer(self)
         limits = self.action_limits
         if cfg.action == "accel_steer":
             self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
@@ -115,7 +120,7 @@ class SymDriveEnv(gym.Env):
             obs["images"] = spaces.Dict({c.name: spaces.Box(0, 255, (*self.image_size(c)[::-1], 3), np.uint8)
                                          for c in self.cameras})
         self.observation_space = spaces.Dict(obs)
-        self.timing = {"render": 0.0, "traffic": 0.0, "physics": 0.0}
+        self.timing = {"render": 0.0, "restore": 0.0, "traffic": 0.0, "physics": 0.0}
         self.ego: EgoState | None = None
 
     # ------------------------------------------------------------------ set-up helpers
@@ -172,7 +177,7 @@ class SymDriveEnv(gym.Env):
         v0 = float(self.recorded_speed[0])
         self.ego = EgoState(float(self.recorded_xy[0, 0]), float(self.recorded_xy[0, 1]),
                             float(self.recorded_yaw[0]), v0)
-        self.timing = {"render": 0.0, "traffic": 0.0, "physics": 0.0}
+        self.timing = {"render": 0.0, "restore": 0.0, "traffic": 0.0, "physics": 0.0}
         t0 = time.perf_counter()
         self.traffic.reset(seed)
         self.actors = self.traffic.states(self.t, self.dt)
@@ -298,8 +303,14 @@ class SymDriveEnv(gym.Env):
                 "end_detail": self.end_detail, "progress": self.history[-1]["progress"],
                 "route_length": self.route.length}
 
-    def render_camera(self, camera: str) -> np.ndarray:
-        """uint8 [H, W, 3] view of ``camera`` at the ego's current pose, traffic at its poses."""
+    def off_path(self) -> bool:
+        """Whether the ego is further sideways of the recorded path than ``restore_threshold_m``."""
+        return abs(self.lateral_offset_from_route()) > self.config.restore_threshold_m
+
+    def render_camera(self, camera: str, restore: bool | None = None) -> np.ndarray:
+        """uint8 [H, W, 3] view of ``camera`` at the ego's current pose, traffic at its poses.
+        With ``config.restore`` (or ``restore=True``) and the ego off the recorded path, the
+        background is the restorer's (:mod:`.restore`) with the traffic rendered over it."""
         import torch
 
         from ..splat.compose import Layer, render_layers
@@ -310,7 +321,17 @@ class SymDriveEnv(gym.Env):
         w, h = self.image_size(cam)
         K = conventions.scale_intrinsics(cam.frames[0].K, w / cam.width, h / cam.height)
         c2w = self.camera_to_world(camera)
-        layers = [] if r.background is None else [Layer(r.background, None, None, 0)]
+        restored = None
+        if (self.restorer is not None if restore is None else restore) and self.off_path():
+            if self.restorer is None:
+                from .restore import OnlineRestorer
+
+                self.restorer = OnlineRestorer(self)
+            t1 = time.perf_counter()
+            restored = self.restorer.background(camera, c2w)
+            self.timing["restore"] += time.perf_counter() - t1
+            t0 += time.perf_counter() - t1
+        layers = [] if r.background is None or restored is not None else [Layer(r.background, None, None, 0)]
         by_id = {a.id: a for a in self.manifest.actors}
         for s in self.actors:
             asset = s.asset or s.id
@@ -318,9 +339,16 @@ class SymDriveEnv(gym.Env):
                 layers.append(Layer(r.actors[asset], torch.as_tensor(s.pose.R, dtype=torch.float32),
                                     torch.as_tensor(s.pose.translation, dtype=torch.float32),
                                     by_id[asset].instance_id if asset in by_id else 0))
-        with torch.no_grad():
-            out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
-                                torch.as_tensor(K, dtype=torch.float32), w, h, background=r.background_color)
-        rgb = out["rgb"].detach().cpu().numpy()
+        black = torch.zeros(3, dtype=torch.float32, device=r.device)
+        if restored is not None and not layers:
+            rgb = restored
+        else:
+            with torch.no_grad():
+                out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
+                                    torch.as_tensor(K, dtype=torch.float32), w, h,
+                                    background=black if restored is not None else r.background_color)
+            rgb = out["rgb"].detach().cpu().numpy()
+            if restored is not None:  # traffic (premultiplied over black) over the restored background
+                rgb = rgb + (1.0 - out["alpha"].detach().cpu().numpy()) * restored
         self.timing["render"] += time.perf_counter() - t0
         return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
