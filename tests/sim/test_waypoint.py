@@ -85,3 +85,17 @@ def test_bad_waypoints(demo, action):
 def test_unknown_action_space(demo):
     with pytest.raises(ValueError, match="action"):
         SymDriveEnv(demo, SimConfig(render=False, action="throttle"))
+
+
+def test_command_waypoint_action(tmp_path):
+    import json
+
+    from symdrive_core.cli import main
+
+    from .conftest import DEMO
+
+    assert main(["sim", str(DEMO), "--agent", "replay", "--action", "waypoint", "--no-render", "--no-video",
+                 "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["episodes"][0]["end_reason"] == "route_end"
+    assert json.dumps(report).count('"waypoint"') >= 1
