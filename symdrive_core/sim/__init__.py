@@ -3,7 +3,8 @@
 ``SymDriveEnv`` (Gymnasium API) renders the package's cameras rigidly attached to the ego, moves
 the ego by a kinematic bicycle model, keeps traffic on its recorded poses (or SUMO in lock-step),
 ends episodes on collision, leaving the road, the route's end or a time limit, and scores them as
-NAVSIM's PDM score does (:mod:`.scores`). Views off the recorded path are raw 3DGS. Heavy imports (torch, gymnasium, imageio) happen inside.
+NAVSIM's PDM score does (:mod:`.scores`). Views off the recorded path are raw 3DGS, or with
+``restore=True`` go through the restorer online (:mod:`.restore`). Heavy imports (torch, gymnasium, imageio) happen inside.
 """
 
 from .config import SimConfig

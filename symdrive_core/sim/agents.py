@@ -18,14 +18,9 @@ import importlib
 
 import numpy as np
 
+from .bicycle import pure_pursuit_steer, world_to_ego
 
-def pure_pursuit_steer(x, y, yaw, target_xy, wheelbase: float) -> float:
-    """Front-wheel angle that puts the rear axle on the circle through ``target_xy``."""
-    rx, ry = x - 0.5 * wheelbase * np.cos(yaw), y - 0.5 * wheelbase * np.sin(yaw)
-    dx, dy = target_xy[0] - rx, target_xy[1] - ry
-    alpha = np.arctan2(dy, dx) - yaw
-    ld = max(np.hypot(dx, dy), 1e-3)
-    return float(np.arctan2(2.0 * wheelbase * np.sin(alpha), ld))
+__all__ = ["Agent", "BUILTIN", "load_agent", "pure_pursuit_steer"]
 
 
 class Agent:
@@ -39,16 +34,24 @@ class Agent:
         raise NotImplementedError
 
     def command(self, accel: float, steer: float) -> np.ndarray:
-        (alo, ahi), (slo, shi) = self.env.action_limits
-        return np.array([np.clip(accel, alo, ahi), np.clip(steer, slo, shi)])
+        """The action in the environment's action space: ``[accel, steer]`` clipped to the
+        limits, or, with ``action="waypoint"``, ``[x, y, speed]``: the last pure-pursuit target
+        (in the ego frame) and the speed ``accel`` reaches in one step."""
+        env = self.env
+        (alo, ahi), (slo, shi) = env.action_limits
+        accel = float(np.clip(accel, alo, ahi))
+        if env.config.action == "waypoint":
+            x, y = world_to_ego(env.ego, self.target)
+            return np.array([x, y, np.clip(env.ego.v + accel * env.dt, 0.0, env.config.max_speed)])
+        return np.array([accel, np.clip(steer, slo, shi)])
 
     def follow(self, s_ahead: float, lateral: float, v_target: float, gain: float = 1.0) -> tuple[float, float]:
         """Pure pursuit to the point ``s_ahead`` metres ahead of the ego's progress, ``lateral``
         metres left of the route, and a proportional speed controller."""
         e, env = self.env.ego, self.env
         s = env.route.progress(e.xy)
-        target = env.route.point_at(s + s_ahead, lateral)
-        steer = pure_pursuit_steer(e.x, e.y, e.yaw, target, env.config.wheelbase_m)
+        self.target = env.route.point_at(s + s_ahead, lateral)
+        steer = pure_pursuit_steer(e.x, e.y, e.yaw, self.target, env.config.wheelbase_m)
         return gain * (v_target - e.v), steer
 
     def lookahead(self) -> float:

@@ -50,3 +50,38 @@ def step(state: EgoState, accel: float, steer: float, dt: float, wheelbase: floa
     rx, ry = rx + dx, ry + dy
     return EgoState(float(rx + half * np.cos(yaw)), float(ry + half * np.sin(yaw)), yaw, v1, float(a_eff),
                     float(steer))
+
+
+def pure_pursuit_steer(x, y, yaw, target_xy, wheelbase: float) -> float:
+    """Front-wheel angle that puts the rear axle on the circle through ``target_xy`` (pure
+    pursuit, Coulter 1992); (x, y) is the box centre, the rear axle half the wheelbase behind."""
+    rx, ry = x - 0.5 * wheelbase * np.cos(yaw), y - 0.5 * wheelbase * np.sin(yaw)
+    dx, dy = target_xy[0] - rx, target_xy[1] - ry
+    alpha = np.arctan2(dy, dx) - yaw
+    ld = max(np.hypot(dx, dy), 1e-3)
+    return float(np.arctan2(2.0 * wheelbase * np.sin(alpha), ld))
+
+
+def ego_to_world(state: EgoState, point) -> np.ndarray:
+    """A point in the ego frame (x forward, y left, metres from the box centre) -> world xy."""
+    c, s = np.cos(state.yaw), np.sin(state.yaw)
+    px, py = float(point[0]), float(point[1])
+    return np.array([state.x + c * px - s * py, state.y + s * px + c * py])
+
+
+def world_to_ego(state: EgoState, xy) -> np.ndarray:
+    """World xy -> the ego frame (x forward, y left, metres from the box centre)."""
+    c, s = np.cos(state.yaw), np.sin(state.yaw)
+    dx, dy = float(xy[0]) - state.x, float(xy[1]) - state.y
+    return np.array([c * dx + s * dy, -s * dx + c * dy])
+
+
+def waypoint_control(state: EgoState, target_ego, v_target: float, wheelbase: float, speed_gain: float,
+                     limits) -> tuple[float, float]:
+    """The low-level controller of the waypoint action: pure pursuit to ``target_ego`` (ego frame)
+    for the steering, ``speed_gain * (v_target - v)`` for the acceleration, both clipped to
+    ``limits`` = ((accel lo, hi), (steer lo, hi))."""
+    (alo, ahi), (slo, shi) = limits
+    steer = pure_pursuit_steer(state.x, state.y, state.yaw, ego_to_world(state, target_ego), wheelbase)
+    accel = speed_gain * (v_target - state.v)
+    return float(np.clip(accel, alo, ahi)), float(np.clip(steer, slo, shi))

@@ -19,6 +19,10 @@ def add_commands(sub) -> None:
     p.add_argument("--traffic", choices=["replay", "sumo"], default="replay",
                    help="actors on their recorded poses, or SUMO vehicles reacting to the ego")
     p.add_argument("--vehicles", type=int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
+    p.add_argument("--action", choices=["accel_steer", "waypoint"], default="accel_steer",
+                   help="the agent's action: [acceleration, steering] or [x, y, speed] (ego-frame target point)")
+    p.add_argument("--restore", action="store_true",
+                   help="views off the recorded path go through the restorer (loads the diffusion model)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
     p.add_argument("--no-video", action="store_true")
     add_external_assets_option(p)
@@ -43,7 +47,8 @@ def _sim(args) -> int:
     if args.dt is not None and not args.dt > 0:
         raise InputError("--dt", f"expected a positive number of seconds, got {args.dt}")
     cfg = SimConfig(dt=args.dt, time_limit_s=args.time_limit, image_size=size, render=not args.no_render,
-                    traffic=args.traffic, sumo_vehicles=args.vehicles)
+                    traffic=args.traffic, sumo_vehicles=args.vehicles, action=args.action,
+                    restore=args.restore)
     try:
         from .agents import load_agent
 

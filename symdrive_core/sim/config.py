@@ -26,6 +26,12 @@ class SimConfig:
     max_brake: float = 8.0
     max_steer: float = 0.6
     max_speed: float = 40.0  # m/s; the model clamps the speed to [0, max_speed]
+    # Action space: "accel_steer" = [acceleration m/s^2, steering rad]; "waypoint" = [x, y, speed]:
+    # a target point in the ego frame (metres from the box centre, x forward, y left) and a target
+    # speed in [0, max_speed] m/s, turned into acceleration and steering (clipped to the limits
+    # above) by pure pursuit and a proportional speed controller with this gain (1/s).
+    action: str = "accel_steer"
+    waypoint_speed_gain: float = 2.0
     # Road: without ground_truth.road, a corridor this wide each side of the recorded path.
     corridor_half_width_m: float = 3.5
     # Off-road when any footprint corner lies this far beyond the road's edge.
@@ -39,6 +45,19 @@ class SimConfig:
     cameras: list[str] | None = None  # None = every camera of the package
     image_size: tuple[int, int] | None = None  # (width, height); None = the package's own
     device: str = "cpu"
+    # Online restoration of off-path views (see restore.py): when the ego is more than
+    # restore_threshold_m sideways of the recorded path, each camera's background goes through the
+    # restorer, auto-regressively (step restore_ar_step_m) from the nearest recorded frame, cached
+    # per (frame, camera, offset rounded to restore_offset_round_m). Sampler: the built-in
+    # restorer's steps and start (a single Euler step), one sample.
+    restore: bool = False
+    restore_threshold_m: float = 0.5
+    restore_offset_round_m: float = 0.25
+    restore_ar_step_m: float = 0.5
+    restore_steps: int = 5
+    restore_n_start: int = 4
+    restore_samples: int = 1
+    restore_seed: int = 0
     # Traffic: "replay" keeps the package's actors on their recorded poses; "sumo" drives
     # vehicles with SUMO/TraCI around the ego.
     traffic: str = "replay"

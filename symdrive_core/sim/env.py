@@ -9,9 +9,17 @@ Observation (a dict):
   offset from the lane's middle m (positive = left), lane index from the right, progress along
   the route m]``.
 
-Action: ``[acceleration m/s^2, front-wheel steering rad]`` through the kinematic bicycle model
-(:mod:`.bicycle`) with the limits of :class:`.config.SimConfig`; a NaN or out-of-range action
-ends the episode with reason ``invalid_action``.
+Action (``config.action``):
+
+* ``"accel_steer"`` (default): ``[acceleration m/s^2, front-wheel steering rad]`` through the
+  kinematic bicycle model (:mod:`.bicycle`) with the limits of :class:`.config.SimConfig`;
+* ``"waypoint"``: ``[x, y, speed]``, a target point in the ego frame (metres from the ego box's
+  centre, x forward, y left) and a target speed (m/s, in [0, max_speed]); the built-in low-level
+  controller (:func:`.bicycle.waypoint_control`: pure pursuit for the steering, the same function
+  the built-in agents steer with, and proportional speed control) turns it into acceleration and
+  steering, clipped to the same limits, for the same bicycle model.
+
+A NaN or out-of-range action ends the episode with reason ``invalid_action``.
 
 The ego: at frame 0 the reference camera (the package's ``ground_truth.camera`` or its first)
 gives the ego pose: its ground point moved back ``camera_ahead_m`` along the recorded heading,
@@ -33,7 +41,7 @@ from gymnasium import spaces
 from .. import conventions
 from ..scene import Manifest, load_manifest
 from . import episode as ep
-from .bicycle import EgoState, step
+from .bicycle import EgoState, step, waypoint_control
 from .config import SimConfig
 from .road import Route, drivable_area
 from .traffic import ReplayTraffic
@@ -93,15 +101,26 @@ class SymDriveEnv(gym.Env):
 
         self.traffic = self._make_traffic()
         self._renderer = None
+        self.restorer = None
+        if cfg.restore and cfg.render:
+            from .restore import OnlineRestorer
+
+            self.restorer = OnlineRestorer(self)
         limits = self.action_limits
-        self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
-                                       np.array([limits[0][1], limits[1][1]], dtype=np.float32))
+        if cfg.action == "accel_steer":
+            self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
+                                           np.array([limits[0][1], limits[1][1]], dtype=np.float32))
+        elif cfg.action == "waypoint":
+            self.action_space = spaces.Box(np.array([-np.inf, -np.inf, 0.0], dtype=np.float32),
+                                           np.array([np.inf, np.inf, cfg.max_speed], dtype=np.float32))
+        else:
+            raise ValueError(f"action: expected 'accel_steer' or 'waypoint', got {cfg.action!r}")
         obs = {"state": spaces.Box(-np.inf, np.inf, (6,), np.float32)}
         if cfg.render:
             obs["images"] = spaces.Dict({c.name: spaces.Box(0, 255, (*self.image_size(c)[::-1], 3), np.uint8)
                                          for c in self.cameras})
         self.observation_space = spaces.Dict(obs)
-        self.timing = {"render": 0.0, "traffic": 0.0, "physics": 0.0}
+        self.timing = {"render": 0.0, "restore": 0.0, "traffic": 0.0, "physics": 0.0}
         self.ego: EgoState | None = None
 
     # ------------------------------------------------------------------ set-up helpers
@@ -158,7 +177,7 @@ class SymDriveEnv(gym.Env):
         v0 = float(self.recorded_speed[0])
         self.ego = EgoState(float(self.recorded_xy[0, 0]), float(self.recorded_xy[0, 1]),
                             float(self.recorded_yaw[0]), v0)
-        self.timing = {"render": 0.0, "traffic": 0.0, "physics": 0.0}
+        self.timing = {"render": 0.0, "restore": 0.0, "traffic": 0.0, "physics": 0.0}
         t0 = time.perf_counter()
         self.traffic.reset(seed)
         self.actors = self.traffic.states(self.t, self.dt)
@@ -174,10 +193,18 @@ class SymDriveEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.end_reason is not None:
             raise RuntimeError(f"the episode has ended ({self.end_reason}); call reset()")
-        problem = ep.check_action(action, self.action_limits)
-        if problem is not None:
-            return self.end(ep.INVALID_ACTION, problem)
-        a, delta = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
+        if self.config.action == "waypoint":
+            problem = ep.check_waypoint(action, self.config.max_speed)
+            if problem is not None:
+                return self.end(ep.INVALID_ACTION, problem)
+            x, y, v = (float(u) for u in np.asarray(action, dtype=np.float64).reshape(-1))
+            a, delta = waypoint_control(self.ego, (x, y), v, self.config.wheelbase_m,
+                                        self.config.waypoint_speed_gain, self.action_limits)
+        else:
+            problem = ep.check_action(action, self.action_limits)
+            if problem is not None:
+                return self.end(ep.INVALID_ACTION, problem)
+            a, delta = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
         t0 = time.perf_counter()
         before = self.route.progress(self.ego.xy)
         self.ego = step(self.ego, a, delta, self.dt, self.config.wheelbase_m, self.config.max_speed)
@@ -276,8 +303,14 @@ class SymDriveEnv(gym.Env):
                 "end_detail": self.end_detail, "progress": self.history[-1]["progress"],
                 "route_length": self.route.length}
 
-    def render_camera(self, camera: str) -> np.ndarray:
-        """uint8 [H, W, 3] view of ``camera`` at the ego's current pose, traffic at its poses."""
+    def off_path(self) -> bool:
+        """Whether the ego is further sideways of the recorded path than ``restore_threshold_m``."""
+        return abs(self.lateral_offset_from_route()) > self.config.restore_threshold_m
+
+    def render_camera(self, camera: str, restore: bool | None = None) -> np.ndarray:
+        """uint8 [H, W, 3] view of ``camera`` at the ego's current pose, traffic at its poses.
+        With ``config.restore`` (or ``restore=True``) and the ego off the recorded path, the
+        background is the restorer's (:mod:`.restore`) with the traffic rendered over it."""
         import torch
 
         from ..splat.compose import Layer, render_layers
@@ -288,7 +321,17 @@ class SymDriveEnv(gym.Env):
         w, h = self.image_size(cam)
         K = conventions.scale_intrinsics(cam.frames[0].K, w / cam.width, h / cam.height)
         c2w = self.camera_to_world(camera)
-        layers = [] if r.background is None else [Layer(r.background, None, None, 0)]
+        restored = None
+        if (self.restorer is not None if restore is None else restore) and self.off_path():
+            if self.restorer is None:
+                from .restore import OnlineRestorer
+
+                self.restorer = OnlineRestorer(self)
+            t1 = time.perf_counter()
+            restored = self.restorer.background(camera, c2w)
+            self.timing["restore"] += time.perf_counter() - t1
+            t0 += time.perf_counter() - t1
+        layers = [] if r.background is None or restored is not None else [Layer(r.background, None, None, 0)]
         by_id = {a.id: a for a in self.manifest.actors}
         for s in self.actors:
             asset = s.asset or s.id
@@ -296,9 +339,16 @@ class SymDriveEnv(gym.Env):
                 layers.append(Layer(r.actors[asset], torch.as_tensor(s.pose.R, dtype=torch.float32),
                                     torch.as_tensor(s.pose.translation, dtype=torch.float32),
                                     by_id[asset].instance_id if asset in by_id else 0))
-        with torch.no_grad():
-            out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
-                                torch.as_tensor(K, dtype=torch.float32), w, h, background=r.background_color)
-        rgb = out["rgb"].detach().cpu().numpy()
+        black = torch.zeros(3, dtype=torch.float32, device=r.device)
+        if restored is not None and not layers:
+            rgb = restored
+        else:
+            with torch.no_grad():
+                out = render_layers(layers, torch.as_tensor(conventions.invert_rigid(c2w), dtype=torch.float64),
+                                    torch.as_tensor(K, dtype=torch.float32), w, h,
+                                    background=black if restored is not None else r.background_color)
+            rgb = out["rgb"].detach().cpu().numpy()
+            if restored is not None:  # traffic (premultiplied over black) over the restored background
+                rgb = rgb + (1.0 - out["alpha"].detach().cpu().numpy()) * restored
         self.timing["render"] += time.perf_counter() - t0
         return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
