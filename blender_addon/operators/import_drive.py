@@ -53,9 +53,12 @@ def read_drive(path: str | Path, images: str | Path | None = None, fps: float = 
         views = _importer("gs_trainer").read_views(model, images)
         fmt = "3dgs"
     else:
-        raise errors.InputError(path, "neither a nerfstudio transforms.json (an object with 'frames') nor a "
-                                "3DGS trainer's cameras.json (a list); for COLMAP run 'symdrive import colmap' "
-                                "and use Import Camera Rig on its package")
+        raise errors.InputError(
+            path,
+            "neither a nerfstudio transforms.json (an object with 'frames') nor a "
+            "3DGS trainer's cameras.json (a list); for COLMAP run 'symdrive import colmap' "
+            "and use Import Camera Rig on its package",
+        )
     return fmt, frames.group_views(views, fps=fps)
 
 
@@ -63,8 +66,12 @@ def _cameras(grouped):
     """Core ``Camera`` records (the type *Import Camera Rig* builds from) and the frames' timing."""
     cams = []
     for name, row in zip(grouped.cameras, grouped.table, strict=True):
-        cfs = [scene_pkg.CameraFrame(v.K, v.c2w, conventions.invert_rigid(v.c2w),
-                                     None if v.image is None else str(v.image)) for v in row]
+        cfs = [
+            scene_pkg.CameraFrame(
+                v.K, v.c2w, conventions.invert_rigid(v.c2w), None if v.image is None else str(v.image)
+            )
+            for v in row
+        ]
         cams.append(scene_pkg.Camera(name, row[0].width, row[0].height, cfs))
     timing = SimpleNamespace(frames=[scene_pkg.Frame(i, t) for i, t in enumerate(grouped.timestamps)])
     return cams, timing
@@ -121,7 +128,10 @@ class SYMDRIVE_OT_import_drive(bpy.types.Operator, ImportHelper):
         "cameras.json)",
     )
     fps: FloatProperty(
-        name="Frame rate", default=10.0, min=0.1, max=1000.0,
+        name="Frame rate",
+        default=10.0,
+        min=0.1,
+        max=1000.0,
         description="Frames per second when the file has no timestamps",
     )
     backgrounds: BoolProperty(name="Recorded frames as backgrounds", default=True)
