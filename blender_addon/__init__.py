@@ -20,7 +20,16 @@ _unregister = None
 
 def _classes():
     from . import panels, prefs, props
-    from .operators import cameras, export_scene, fit_size, import_splats, import_vehicle, preview, trajectory
+    from .operators import (
+        cameras,
+        export_scene,
+        fit_size,
+        import_drive,
+        import_splats,
+        import_vehicle,
+        preview,
+        trajectory,
+    )
 
     return (
         *props.classes,
@@ -33,6 +42,7 @@ def _classes():
         trajectory.SYMDRIVE_OT_import_package_poses,
         trajectory.SYMDRIVE_OT_import_sumo_fcd,
         cameras.SYMDRIVE_OT_import_camera_rig,
+        import_drive.SYMDRIVE_OT_import_drive,
         export_scene.SYMDRIVE_OT_export_scene,
         preview.SYMDRIVE_OT_render_preview,
         *panels.panels,

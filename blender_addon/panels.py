@@ -26,6 +26,7 @@ class SYMDRIVE_PT_main(_Sidebar, bpy.types.Panel):
         col.operator("symdrive.import_splats", icon="POINTCLOUD_DATA")
         col.operator("symdrive.import_vehicle", icon="AUTO")
         col.operator("symdrive.import_camera_rig", icon="CAMERA_DATA")
+        col.operator("symdrive.import_drive", icon="FILE_MOVIE")
         layout.prop(settings, "background")
         layout.operator("symdrive.render_preview", icon="RENDER_STILL")
 
@@ -107,6 +108,7 @@ class SYMDRIVE_PT_export(_Sidebar, bpy.types.Panel):
 def menu_import(self, context):
     self.layout.operator("symdrive.import_splats", text="3DGS Splats (.ply)")
     self.layout.operator("symdrive.import_vehicle", text="SymDrive Vehicle (.obj/.ply/.glb)")
+    self.layout.operator("symdrive.import_drive", text="Recorded Drive (nerfstudio / 3DGS .json)")
 
 
 def menu_export(self, context):

@@ -74,8 +74,9 @@ def _find_image(folder: Path, stem: str) -> Path:
     return folder / (stem + ".png")  # reported as missing by the package writer
 
 
-def read_gs_output(model: str | Path, images: str | Path | None, *, iteration: int | None = None,
-                   splats: str | Path | None = None, camera_name: str = "front", fps: float = 10.0) -> Source:
+def read_views(model: str | Path, images: str | Path | None) -> list[View]:
+    """The views of ``cameras.json`` in the trainer's output folder ``model`` (images looked up in
+    ``images``, else where ``cfg_args`` says): poses and intrinsics only, no splats read."""
     model = Path(model)
     cams_path = model / "cameras.json"
     if not cams_path.is_file():
@@ -119,6 +120,13 @@ def read_gs_output(model: str | Path, images: str | Path | None, *, iteration: i
         views.append(View(name=image.name if image.is_file() else name, K=conventions.intrinsics(fx, fy, w / 2.0, h / 2.0),
                           width=w, height=h, c2w=c2w, source=cams_path, where=f"{where} ({name})", image=image,
                           camera_id="0"))
+    return views
+
+
+def read_gs_output(model: str | Path, images: str | Path | None, *, iteration: int | None = None,
+                   splats: str | Path | None = None, camera_name: str = "front", fps: float = 10.0) -> Source:
+    model = Path(model)
+    views = read_views(model, images)
     ply = Path(splats) if splats is not None else newest_iteration(model, iteration)
     from ..io.ply import read_splats
 

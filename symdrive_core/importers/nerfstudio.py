@@ -49,8 +49,9 @@ def _matrix(v, rows: int, path: Path, where: str) -> np.ndarray:
     return out
 
 
-def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None, camera_name: str = "front",
-                    fps: float = 10.0) -> Source:
+def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[View]]:
+    """(the transforms.json read, its JSON, applied_transform or identity, its views): poses and
+    intrinsics only, nothing else read (the add-on's *Import Recorded Drive* uses this)."""
     path = Path(transforms)
     if path.is_dir():
         path = path / "transforms.json"
@@ -109,6 +110,18 @@ def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None,
             name = name[2:]
         views.append(View(name=name, K=K, width=int(intr["w"]), height=int(intr["h"]), c2w=c2w, source=path,
                           where=where, image=base / fp, timestamp=None if t is None else float(t)))
+    # Views' folder layout is {camera}/{frame} when the dataset has one folder per camera; a single
+    # images/ folder is one camera.
+    if views and all(v.name.startswith("images/") for v in views):
+        for v in views:
+            v.name = v.name[len("images/"):]
+    return path, data, A, views
+
+
+def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None, camera_name: str = "front",
+                    fps: float = 10.0) -> Source:
+    path, data, A, views = read_views(transforms)
+    base = path.parent
     points = colors = None
     ply = data.get("ply_file_path")
     if isinstance(ply, str) and ply:
@@ -123,11 +136,6 @@ def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None,
         from ..io.ply import read_splats
 
         g = read_splats(splats)
-    # Views' folder layout is {camera}/{frame} when the dataset has one folder per camera; a single
-    # images/ folder is one camera.
-    if views and all(v.name.startswith("images/") for v in views):
-        for v in views:
-            v.name = v.name[len("images/"):]
     return Source("nerfstudio", path, group_views(views, camera_name=camera_name, fps=fps), splats=g,
                   splats_path=None if splats is None else Path(splats), points=points, colors=colors,
                   pre=None if data.get("applied_transform") is None else A)
