@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..diffusion.commands import SAMPLER_DEFAULTS
+from ..diffusion.defaults import SAMPLER_DEFAULTS
 from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
 from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
 from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
+
 
 def _floats(text: str) -> list[float]:
     try:
@@ -35,16 +37,8 @@ def _signed_offsets(text: str) -> list[float]:
     return values
 
 
-# (steps, n_start, samples) per backend; the built-in one's are measured (symdrive bench accuracy-time)
-# and are pipeline.stages.StageOptions' defaults too; Flux keeps the paper's.
-SAMPLER_DEFAULTS = {"builtin": (5, 4, 8), "flux": (50, 10, 1)}
-# (iterations, densification cap) of each cycle reconstruction (make-pairs --cycle); data.make_pairs'
-# default too. About 1.5 minutes each on the built-in street.
-CYCLE_DEFAULTS = (1000, 60000)
-
-
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser(
         "make-pairs", help="render restorer training pairs (I_-d, I_d) -> I_0 from a reconstruction"
@@ -171,8 +165,8 @@ def _load_scene(args):
 
 
 def _make_pairs(args) -> int:
-    from .cycle import cycle_config
-    from .data import make_pairs
+    from ..diffusion.cycle import cycle_config
+    from ..diffusion.data import make_pairs
 
     manifest, gaussians = _load_scene(args)
     cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
@@ -184,8 +178,8 @@ def _make_pairs(args) -> int:
 
 
 def _train(args) -> int:
-    from ..cli import print_json
-    from .train import TrainConfig, train_restorer
+    from ..diffusion.train import TrainConfig, train_restorer
+    from . import print_json
 
     cfg = TrainConfig()
     names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
@@ -202,9 +196,9 @@ def _restore(args) -> int:
 
     import torch
 
+    from ..diffusion.models import load_restorer
+    from ..diffusion.sampler import SamplerConfig
     from ..io.atomic import write_text_atomic
-    from .models import load_restorer
-    from .sampler import SamplerConfig
 
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
@@ -239,8 +233,8 @@ def _restore(args) -> int:
 
 def _check_frames(manifest, args) -> None:
     """--frames / --refine-frames must name frames of the camera that is shifted sideways."""
+    from ..diffusion.restore import lateral_camera
     from ..errors import InputError
-    from .restore import lateral_camera
 
     cam = lateral_camera(manifest)
     for option, frames in (("--frames", args.frames), ("--refine-frames", args.refine_frames)):
@@ -251,8 +245,8 @@ def _check_frames(manifest, args) -> None:
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
+    from ..diffusion.restore import lateral_camera, restore_lateral_views
     from ..io.images import write_image
-    from .restore import lateral_camera, restore_lateral_views
 
     cam = lateral_camera(manifest)
     views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
@@ -269,8 +263,8 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     import time
 
+    from ..diffusion.restore import run_lateral_restoration, score_gaussians
     from ..io.ply import write_splats
-    from .restore import run_lateral_restoration, score_gaussians
 
     methods = ("single_view", "ar_d0.5", "ar_d1.0")
     t0 = time.perf_counter()
@@ -280,8 +274,8 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     rows = score_gaussians(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
     if args.refine:
-        from .refine import RefineConfig, refine_gaussians
-        from .restore import restore_lateral_views
+        from ..diffusion.refine import RefineConfig, refine_gaussians
+        from ..diffusion.restore import restore_lateral_views
 
         # As the pipeline does: the lateral views of every recorded frame (not only the scored
         # ones) at --offsets, restored by the chain with --step; scored chains are reused.

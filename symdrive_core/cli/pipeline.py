@@ -7,7 +7,7 @@ FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are l
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option, device_arg
+    from . import add_external_assets_option, device_arg
 
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -37,9 +37,7 @@ def add_commands(sub) -> None:
     add_external_assets_option(p)
     p.set_defaults(func=_batch)
 
-    from .render_command import add_render_command
-
-    add_render_command(sub)
+    _add_render_command(sub)
 
     p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
     p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
@@ -59,9 +57,9 @@ def add_commands(sub) -> None:
 
 
 def _plan(args) -> int:
-    from ..cli import print_json
+    from ..pipeline.plan import PlanOptions, format_plan, make_plan
     from ..scene import load_manifest
-    from .plan import PlanOptions, format_plan, make_plan
+    from . import print_json
 
     plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
                      PlanOptions(refine=not args.no_refine))
@@ -73,8 +71,8 @@ def _plan(args) -> int:
 
 
 def _run(args) -> int:
-    from .plan import PlanOptions
-    from .run import run_scene
+    from ..pipeline.plan import PlanOptions
+    from ..pipeline.run import run_scene
 
     report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
                        device=args.device, progress=not args.quiet, force=args.force,
@@ -86,7 +84,7 @@ def _run(args) -> int:
 
 
 def _batch(args) -> int:
-    from .batch import run_batch
+    from ..pipeline.batch import run_batch
 
     reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
                         frames_per_task=args.frames_per_task, device=args.device, force=args.force,
@@ -98,10 +96,10 @@ def _batch(args) -> int:
 
 
 def _accuracy_time(args) -> int:
+    from ..pipeline.accuracy_time import format_table, run_settings, write_outputs
+    from ..pipeline.demo import DEMO_PACKAGE
+    from ..pipeline.knobs import WHY_DEFAULTS, package_settings
     from ..scene import load_manifest
-    from .accuracy_time import format_table, run_settings, write_outputs
-    from .demo import DEMO_PACKAGE
-    from .knobs import WHY_DEFAULTS, package_settings
 
     manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)
     settings, skipped = package_settings(manifest, quick=args.quick)
@@ -116,10 +114,39 @@ def _accuracy_time(args) -> int:
 
 
 def _demo(args) -> int:
-    from .demo import run_demo
+    from ..pipeline.demo import run_demo
 
     report = run_demo(args.out, quick=args.quick, progress=not args.quiet, force=args.force)
     print(f"demo finished in {report['demo_seconds']} s: {args.out}/report.md, {args.out}/report.json")
     for key, rows in report["metrics"].items():
         print(f"  {key}: {rows}")
+    return 0
+
+
+def _add_render_command(sub) -> None:
+    from . import add_external_assets_option, device_arg
+
+    p = sub.add_parser("render", help="render one camera's frames of a scene package (background and actors) "
+                                      "as PNGs, a quick preview without a run")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--camera", required=True, help="camera name in the manifest")
+    p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
+    p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
+    p.add_argument("--width", type=int, help="output width (default: the camera's; aspect kept if only "
+                                             "--height is given)")
+    p.add_argument("--height", type=int, help="output height (default: the camera's)")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_external_assets_option(p)
+    p.set_defaults(func=_render)
+
+
+def _render(args) -> int:
+    from ..pipeline.preview import render_package
+
+    paths = render_package(args.package, args.camera, args.frames, args.out, width=args.width, height=args.height,
+                           device=args.device, allow_external=args.allow_external_assets,
+                           progress=not args.quiet)
+    for p in paths:
+        print(p)
     return 0

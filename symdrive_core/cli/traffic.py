@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("traffic", help="simulate traffic on the package's road with SUMO; write a new package "
                                        "whose actors are the vehicles")
@@ -31,11 +31,11 @@ def _traffic(args) -> int:
 
     from ..errors import InputError
     from ..scene import load_manifest
-    from .assets import asset_pool
-    from .manoeuvre_spec import load_manoeuvres
-    from .package import check_output_path, traffic_manifest, write_package
-    from .road import road_from_json, road_from_spec
-    from .simulate import DEFAULT_SPEED, TrafficOptions, simulate
+    from ..traffic.assets import asset_pool
+    from ..traffic.manoeuvre_spec import load_manoeuvres
+    from ..traffic.package import check_output_path, traffic_manifest, write_package
+    from ..traffic.road import road_from_json, road_from_spec
+    from ..traffic.simulate import DEFAULT_SPEED, TrafficOptions, simulate
 
     src = load_manifest(args.package, allow_external=args.allow_external_assets)
     if args.road:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("sim", help="closed-loop simulation: an agent drives the ego car through the package; "
                                    "writes report.json (PDM scores) and a video per episode")
@@ -27,8 +27,8 @@ def add_commands(sub) -> None:
 
 def _sim(args) -> int:
     from ..errors import InputError
-    from .config import SimConfig
-    from .runner import run
+    from ..sim.config import SimConfig
+    from ..sim.runner import run
 
     if args.episodes < 1:
         raise InputError("--episodes", f"expected at least 1, got {args.episodes}")
@@ -45,7 +45,7 @@ def _sim(args) -> int:
     cfg = SimConfig(dt=args.dt, time_limit_s=args.time_limit, image_size=size, render=not args.no_render,
                     traffic=args.traffic, sumo_vehicles=args.vehicles)
     try:
-        from .agents import load_agent
+        from ..sim.agents import load_agent
 
         load_agent(args.agent)
     except (ValueError, ImportError, AttributeError) as exc:
