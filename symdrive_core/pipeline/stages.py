@@ -210,7 +210,7 @@ def finetune_stage(ctx) -> dict:
     from ..io.ply import write_splats
     from ..optim.finetune import FinetuneConfig, finetune_colors
     from ..splat.tensors import GaussianTensors
-    from .run import ASSET_CACHE
+    from .outputs import ASSET_CACHE
     from .scene_render import actor_splats
 
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))
