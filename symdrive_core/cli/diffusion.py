@@ -16,7 +16,7 @@ def _floats(text: str) -> list[float]:
     try:
         return [float(v) for v in text.split(",") if v.strip()]
     except ValueError as exc:
-        raise SystemExit(f"expected comma-separated numbers, got {text!r}") from exc
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from exc
 
 
 def _ints(text: str) -> list[int]:
@@ -119,11 +119,12 @@ def add_commands(sub) -> None:
                    help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=int, help="sampler steps (default: 5 builtin, 50 flux)")
     p.add_argument("--n-start", type=int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="sampler noise seed (default 0)")
     p.add_argument("--samples", type=int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         "times the work (default: 8 builtin, 1 flux)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder: restored views and restored.json, or metrics.json with --evaluate")
     p.add_argument(
         "--evaluate",
         action="store_true",
@@ -134,16 +135,17 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=int, default=900)
+    p.add_argument("--refine-iters", type=int, default=900, help="refinement iterations of --refine (default 900)")
     p.add_argument("--refine-frames", type=_ints,
                    help="recorded frames whose restored lateral views --refine trains on (default: all)")
-    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin")
+    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
+                   help="restorer: builtin (the shipped network) or flux (FLUX.1-dev from the files named below)")
     p.add_argument("--weights", type=Path, help="built-in restorer weights (default: the shipped ones)")
     p.add_argument("--flux-transformer", help="FLUX.1-dev transformer folder (diffusers layout)")
     p.add_argument("--flux-vae", help="FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
-    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     add_external_assets_option(p)
     p.set_defaults(func=_restore)
 

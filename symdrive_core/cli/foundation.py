@@ -13,7 +13,7 @@ def add_commands(sub) -> None:
     p.set_defaults(func=_validate)
 
     p = sub.add_parser("info", help="count, SH degree and bounds of a 3DGS splat PLY")
-    p.add_argument("ply")
+    p.add_argument("ply", help="splat PLY file")
     p.add_argument("--drop-invalid", action="store_true", help="ignore splats with NaN/Inf values")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_info)

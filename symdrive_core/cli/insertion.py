@@ -25,7 +25,8 @@ def add_commands(sub) -> None:
     p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
     p.add_argument("--harmonize-samples", type=int, help="harmonizations averaged per frame (default 4)")
     p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
-    p.add_argument("--finetune-steps", type=int, default=300)
+    p.add_argument("--finetune-steps", type=int, default=300,
+                   help="colour/opacity fine-tune steps per vehicle (default 300)")
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
     p.add_argument("--assets-out", help="write the fine-tuned assets (splat PLY) here")

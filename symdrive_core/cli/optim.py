@@ -17,7 +17,7 @@ def add_commands(sub) -> None:
     p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight (default 0: off)")
     p.add_argument("--max-gaussians", type=int, default=None, help="cap for densification (default 200000)")
     p.add_argument("--max-init-points", type=int, default=None, help="point-cloud subset to start from (default 30000)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the reconstruction (default 0)")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats at the result")

@@ -10,7 +10,7 @@ def add_commands(sub) -> None:
                                    "writes report.json (PDM scores) and a video per episode")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--agent", default="replay", help="replay, idm, cut-in, or MODULE:CLASS (default replay)")
-    p.add_argument("--episodes", type=int, default=1)
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run (default 1)")
     p.add_argument("--seed", type=int, default=0, help="episode i runs from seed S + i")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
@@ -20,7 +20,7 @@ def add_commands(sub) -> None:
                    help="actors on their recorded poses, or SUMO vehicles reacting to the ego")
     p.add_argument("--vehicles", type=int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
-    p.add_argument("--no-video", action="store_true")
+    p.add_argument("--no-video", action="store_true", help="write no episode videos")
     add_external_assets_option(p)
     p.set_defaults(func=_sim)
 

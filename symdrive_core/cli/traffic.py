@@ -12,7 +12,7 @@ def add_commands(sub) -> None:
     p.add_argument("--density", type=float, required=True, help="vehicles per km per lane (0 = no traffic)")
     p.add_argument("--seconds", type=float, required=True,
                    help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the demand and of SUMO (default 0)")
     p.add_argument("--speed", type=float, default=None, help="speed limit in m/s (default 13.89; 0 = standing)")
     p.add_argument("--manoeuvre", help="manoeuvre spec JSON (cut_in, lane_change, hard_brake), run through TraCI")
     p.add_argument("--assets", nargs="+", help="vehicle asset folders (with wlh.json) or folders holding them; "
