@@ -29,7 +29,7 @@ from .core import errors
 
 IMAGE_NAME = "SymDrive Preview"
 PREF_PATH = "Edit > Preferences > Add-ons > SymDrive > symdrive command"
-RENDERER_MODULES = ("torch", "numba", "symdrive_core.pipeline.scene_render", "symdrive_core.pipeline.render_command")
+RENDERER_MODULES = ("torch", "numba", "symdrive_core.pipeline.scene_render", "symdrive_core.pipeline.preview")
 COMMAND_TIMEOUT_S = 600
 
 
@@ -134,7 +134,7 @@ def export_frame(scene, camera, folder: Path) -> Path:
 
 
 def render_in_process(package: Path, camera: str, width: int, height: int) -> np.ndarray:
-    from symdrive_core.pipeline.render_command import render_images
+    from symdrive_core.pipeline.preview import render_images
     from symdrive_core.scene import load_manifest
 
     manifest = load_manifest(package, allow_external=True)  # the user's own files, named by the export

@@ -4,7 +4,8 @@ Modules: ``flow`` (schedule, Euler sampler, N_start initialisation), ``latent`` 
 Flux VAE), ``unet`` (the built-in network), ``models`` (backends and ``load_restorer``),
 ``flux`` (Flux.1-dev + LoRA), ``sampler`` (images in, image out), ``data`` (training pairs),
 ``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS refinement
-on restored views), ``harmonize`` (RePaint), ``commands`` (CLI).
+on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers outside read
+without torch; the command line is ``cli/diffusion.py``).
 
 Design of the built-in backend, which must train on a CPU in minutes and ship in a few MB:
 

@@ -20,8 +20,8 @@ from ..gaussians import Gaussians
 from ..optim.densify import DensifyConfig
 from ..optim.reconstruct import ReconstructConfig, View, fit, initial_gaussians, load_views
 from ..scene import Manifest
-from .commands import CYCLE_DEFAULTS
 from .data import SplatRenderer, to_uint8
+from .defaults import CYCLE_DEFAULTS
 
 
 def cycle_config(iters: int = CYCLE_DEFAULTS[0], max_gaussians: int = CYCLE_DEFAULTS[1]) -> ReconstructConfig:

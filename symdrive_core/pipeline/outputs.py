@@ -20,6 +20,7 @@ JOURNAL = ".symdrive-written"  # one relative path a line; a trailing "/" claims
 LOCK = ".symdrive.lock"
 STATE = "state.json"
 REPORT = "report.json"
+ASSET_CACHE = "asset_cache"  # mesh-only actors' sampled splats, shared by the stages that render them
 BOOKKEEPING = frozenset({JOURNAL, LOCK, STATE, REPORT})
 # Temporaries of io.atomic: ".<stem>.<random>.part<ext>" (files), ".<name>.<random>.part" and
 # ".<name>.old-<pid>" (folders); the random part is tempfile's.

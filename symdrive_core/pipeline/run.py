@@ -20,13 +20,11 @@ from ..scene import Manifest, check_files, load_manifest
 from . import stages
 from .cache_key import inputs_key
 from .lock import OutputLock
-from .outputs import OutputTree
+from .outputs import ASSET_CACHE, OutputTree
 from .plan import APPLIED_INSIDE, Plan, PlanOptions, make_plan
 from .report import Report
 from .stages import Shared, StageOptions
 from .state import RunState
-
-ASSET_CACHE = "asset_cache"  # mesh-only actors' sampled splats, shared by the stages that render them
 
 
 @dataclass

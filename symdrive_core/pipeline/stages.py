@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..diffusion.commands import SAMPLER_DEFAULTS
+from ..diffusion.defaults import SAMPLER_DEFAULTS
 from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
 from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
 from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS
@@ -214,7 +214,7 @@ def finetune_stage(ctx) -> dict:
     from ..io.ply import write_splats
     from ..optim.finetune import FinetuneConfig, finetune_colors
     from ..splat.tensors import GaussianTensors
-    from .run import ASSET_CACHE
+    from .outputs import ASSET_CACHE
     from .scene_render import actor_splats
 
     cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))

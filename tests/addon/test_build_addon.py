@@ -74,7 +74,7 @@ def test_zip_has_the_extension_manifest_and_the_numpy_only_core(tmp_path):
     ):
         assert required in names
     heavy = [
-        n for n in names if any(k in n for k in ("/splat/", "/diffusion/", "/optim/", "/pipeline/", "cli.py"))
+        n for n in names if any(k in n for k in ("/splat/", "/diffusion/", "/optim/", "/pipeline/", "/cli/"))
     ]
     assert heavy == [] and not any(n.endswith(".pyc") for n in names)
 

@@ -11,7 +11,7 @@ from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 def test_registering_the_commands_loads_no_torch_or_diffusers():
     code = (
-        "import sys, symdrive_core.diffusion.commands as c, argparse; "
+        "import sys, symdrive_core.cli.diffusion as c, argparse; "
         "c.add_commands(argparse.ArgumentParser().add_subparsers()); "
         "print(sorted(m for m in ('torch', 'diffusers', 'peft') if m in sys.modules))"
     )

@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
+from symdrive_core.cli import insertion as commands
 from symdrive_core.errors import InputError
-from symdrive_core.insertion import commands
 from symdrive_core.io.images import read_image, read_mask
 
 from . import package

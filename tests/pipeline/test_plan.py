@@ -114,7 +114,7 @@ def test_plan_command_never_imports_torch_or_diffusion(make_package):
     code = ("import sys\nfrom symdrive_core.cli import main\n"
             f"rc = main(['plan', {str(path)!r}])\n"
             "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'diffusers')"
-            " or m.startswith('symdrive_core.diffusion.') and m != 'symdrive_core.diffusion.commands']\n"
+            " or m.startswith('symdrive_core.diffusion.') and m != 'symdrive_core.diffusion.defaults']\n"
             "print('LOADED', bad)\nsys.exit(rc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr

@@ -9,7 +9,7 @@ from symdrive_core.cli import main
 from symdrive_core.errors import InputError
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import write_splats
-from symdrive_core.pipeline.render_command import parse_frames, render_images
+from symdrive_core.pipeline.preview import parse_frames, render_images
 from symdrive_core.scene import load_manifest
 from tests.conftest import random_gaussians
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from .cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("validate", help="check a scene package's manifest.json and the files it names")
     p.add_argument("manifest", help="manifest.json or the package directory")
@@ -13,14 +13,14 @@ def add_commands(sub) -> None:
     p.set_defaults(func=_validate)
 
     p = sub.add_parser("info", help="count, SH degree and bounds of a 3DGS splat PLY")
-    p.add_argument("ply")
+    p.add_argument("ply", help="splat PLY file")
     p.add_argument("--drop-invalid", action="store_true", help="ignore splats with NaN/Inf values")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_info)
 
 
 def _validate(args) -> int:
-    from .scene import check_files, load_manifest
+    from ..scene import check_files, load_manifest
 
     m = load_manifest(args.manifest, allow_external=args.allow_external_assets)
     if not args.no_files:
@@ -31,8 +31,8 @@ def _validate(args) -> int:
 
 
 def _info(args) -> int:
-    from .cli import print_json
-    from .io.ply import describe, read_splats
+    from ..io.ply import describe, read_splats
+    from . import print_json
 
     info = describe(args.ply, read_splats(args.ply, drop_invalid=args.drop_invalid))
     if args.json:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("traffic", help="simulate traffic on the package's road with SUMO; write a new package "
                                        "whose actors are the vehicles")
@@ -12,7 +12,7 @@ def add_commands(sub) -> None:
     p.add_argument("--density", type=float, required=True, help="vehicles per km per lane (0 = no traffic)")
     p.add_argument("--seconds", type=float, required=True,
                    help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the demand and of SUMO (default 0)")
     p.add_argument("--speed", type=float, default=None, help="speed limit in m/s (default 13.89; 0 = standing)")
     p.add_argument("--manoeuvre", help="manoeuvre spec JSON (cut_in, lane_change, hard_brake), run through TraCI")
     p.add_argument("--assets", nargs="+", help="vehicle asset folders (with wlh.json) or folders holding them; "
@@ -31,11 +31,11 @@ def _traffic(args) -> int:
 
     from ..errors import InputError
     from ..scene import load_manifest
-    from .assets import asset_pool
-    from .manoeuvre_spec import load_manoeuvres
-    from .package import check_output_path, traffic_manifest, write_package
-    from .road import road_from_json, road_from_spec
-    from .simulate import DEFAULT_SPEED, TrafficOptions, simulate
+    from ..traffic.assets import asset_pool
+    from ..traffic.manoeuvre_spec import load_manoeuvres
+    from ..traffic.package import check_output_path, traffic_manifest, write_package
+    from ..traffic.road import road_from_json, road_from_spec
+    from ..traffic.simulate import DEFAULT_SPEED, TrafficOptions, simulate
 
     src = load_manifest(args.package, allow_external=args.allow_external_assets)
     if args.road:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("sim", help="closed-loop simulation: an agent drives the ego car through the package; "
                                    "writes report.json (PDM scores) and a video per episode")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--agent", default="replay", help="replay, idm, cut-in, or MODULE:CLASS (default replay)")
-    p.add_argument("--episodes", type=int, default=1)
+    p.add_argument("--episodes", type=int, default=1, help="episodes to run (default 1)")
     p.add_argument("--seed", type=int, default=0, help="episode i runs from seed S + i")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
@@ -24,15 +24,15 @@ def add_commands(sub) -> None:
     p.add_argument("--restore", action="store_true",
                    help="views off the recorded path go through the restorer (loads the diffusion model)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
-    p.add_argument("--no-video", action="store_true")
+    p.add_argument("--no-video", action="store_true", help="write no episode videos")
     add_external_assets_option(p)
     p.set_defaults(func=_sim)
 
 
 def _sim(args) -> int:
     from ..errors import InputError
-    from .config import SimConfig
-    from .runner import run
+    from ..sim.config import SimConfig
+    from ..sim.runner import run
 
     if args.episodes < 1:
         raise InputError("--episodes", f"expected at least 1, got {args.episodes}")
@@ -50,7 +50,7 @@ def _sim(args) -> int:
                     traffic=args.traffic, sumo_vehicles=args.vehicles, action=args.action,
                     restore=args.restore)
     try:
-        from .agents import load_agent
+        from ..sim.agents import load_agent
 
         load_agent(args.agent)
     except (ValueError, ImportError, AttributeError) as exc:

@@ -9,12 +9,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
+
 
 def _floats(text: str) -> list[float]:
     try:
         return [float(v) for v in text.split(",") if v.strip()]
     except ValueError as exc:
-        raise SystemExit(f"expected comma-separated numbers, got {text!r}") from exc
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from exc
 
 
 def _ints(text: str) -> list[int]:
@@ -35,16 +37,8 @@ def _signed_offsets(text: str) -> list[float]:
     return values
 
 
-# (steps, n_start, samples) per backend; the built-in one's are measured (symdrive bench accuracy-time)
-# and are pipeline.stages.StageOptions' defaults too; Flux keeps the paper's.
-SAMPLER_DEFAULTS = {"builtin": (5, 4, 8), "flux": (50, 10, 1)}
-# (iterations, densification cap) of each cycle reconstruction (make-pairs --cycle); data.make_pairs'
-# default too. About 1.5 minutes each on the built-in street.
-CYCLE_DEFAULTS = (1000, 60000)
-
-
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser(
         "make-pairs", help="render restorer training pairs (I_-d, I_d) -> I_0 from a reconstruction"
@@ -151,13 +145,14 @@ def add_commands(sub) -> None:
                    help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=int, help="sampler steps (default: 5 builtin, 50 flux)")
     p.add_argument("--n-start", type=int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="sampler noise seed (default 0)")
     p.add_argument("--samples", type=int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         "times the work (default: 8 builtin, 1 flux)")
     p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles (default 4)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder: restored views and restored.json, or metrics.json with --evaluate")
     p.add_argument(
         "--evaluate",
         action="store_true",
@@ -168,16 +163,17 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=int, default=900)
+    p.add_argument("--refine-iters", type=int, default=900, help="refinement iterations of --refine (default 900)")
     p.add_argument("--refine-frames", type=_ints,
                    help="recorded frames whose restored lateral views --refine trains on (default: all)")
-    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin")
+    p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
+                   help="restorer: builtin (the shipped network) or flux (FLUX.1-dev from the files named below)")
     p.add_argument("--weights", type=Path, help="built-in restorer weights (default: the shipped ones)")
     p.add_argument("--flux-transformer", help="FLUX.1-dev transformer folder (diffusers layout)")
     p.add_argument("--flux-vae", help="FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
-    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     add_external_assets_option(p)
     p.set_defaults(func=_restore)
 
@@ -199,8 +195,8 @@ def _load_scene(args):
 
 
 def _make_pairs(args) -> int:
-    from .cycle import cycle_config
-    from .data import make_pairs
+    from ..diffusion.cycle import cycle_config
+    from ..diffusion.data import make_pairs
 
     manifest, gaussians = _load_scene(args)
     cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
@@ -212,8 +208,8 @@ def _make_pairs(args) -> int:
 
 
 def _train(args) -> int:
-    from ..cli import print_json
-    from .train import TrainConfig, train_restorer
+    from ..diffusion.train import TrainConfig, train_restorer
+    from . import print_json
 
     if args.backend == "flux":
         return _train_flux(args)
@@ -237,9 +233,9 @@ def _train(args) -> int:
 
 
 def _train_flux(args) -> int:
-    from ..cli import print_json
+    from . import print_json
     from ..errors import InputError
-    from .flux_train import FluxTrainConfig, train_flux_lora
+    from ..diffusion.flux_train import FluxTrainConfig, train_flux_lora
 
     builtin_only = ("ema", "width", "t_max", "full_fraction", "output", "init")
     for name in builtin_only:
@@ -267,7 +263,7 @@ def _train_flux(args) -> int:
 
 
 def _flux_prompt(args) -> int:
-    from .flux_prompt import DEFAULT_PROMPT, write_prompt_file
+    from ..diffusion.flux_prompt import DEFAULT_PROMPT, write_prompt_file
 
     out = write_prompt_file(args.text_encoders, args.out, args.text or DEFAULT_PROMPT, args.max_length, args.device)
     print(f"wrote {out}")
@@ -279,9 +275,9 @@ def _restore(args) -> int:
 
     import torch
 
+    from ..diffusion.models import load_restorer
+    from ..diffusion.sampler import SamplerConfig
     from ..io.atomic import write_text_atomic
-    from .models import load_restorer
-    from .sampler import SamplerConfig
 
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
@@ -316,8 +312,8 @@ def _restore(args) -> int:
 
 def _check_frames(manifest, args) -> None:
     """--frames / --refine-frames must name frames of the camera that is shifted sideways."""
+    from ..diffusion.restore import lateral_camera
     from ..errors import InputError
-    from .restore import lateral_camera
 
     cam = lateral_camera(manifest)
     for option, frames in (("--frames", args.frames), ("--refine-frames", args.refine_frames)):
@@ -328,8 +324,8 @@ def _check_frames(manifest, args) -> None:
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
+    from ..diffusion.restore import lateral_camera, restore_lateral_views
     from ..io.images import write_image
-    from .restore import lateral_camera, restore_lateral_views
 
     cam = lateral_camera(manifest)
     views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
@@ -346,8 +342,8 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     import time
 
+    from ..diffusion.restore import run_lateral_restoration, score_gaussians
     from ..io.ply import write_splats
-    from .restore import run_lateral_restoration, score_gaussians
 
     methods = ("single_view", "ar_d0.5", "ar_d1.0")
     t0 = time.perf_counter()
@@ -357,8 +353,8 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     rows = score_gaussians(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
     if args.refine:
-        from .refine import RefineConfig, refine_gaussians
-        from .restore import restore_lateral_views
+        from ..diffusion.refine import RefineConfig, refine_gaussians
+        from ..diffusion.restore import restore_lateral_views
 
         # As the pipeline does: the lateral views of every recorded frame (not only the scored
         # ones) at --offsets, restored by the chain with --step; scored chains are reused.

@@ -34,11 +34,11 @@ def add_commands(sub) -> None:
     _common(p, images=True)
     p.set_defaults(func=_colmap)
     p = isub.add_parser("nerfstudio", help="nerfstudio transforms.json (OpenGL camera axes)")
-    p.add_argument("transforms", metavar="TRANSFORMS_JSON")
+    p.add_argument("transforms", metavar="TRANSFORMS_JSON", help="nerfstudio transforms.json")
     _common(p, images=False)
     p.set_defaults(func=_nerfstudio)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
-    p.add_argument("model", metavar="MODEL_DIR")
+    p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
     p.add_argument("--iteration", type=int, help="point_cloud/iteration_N to use (default: the newest)")
     p.set_defaults(func=_gs)
@@ -48,7 +48,7 @@ def _options(args):
     from pathlib import Path
 
     from ..errors import InputError
-    from .package import Options, parse_up
+    from ..importers.package import Options, parse_up
 
     if args.camera_height is not None and not args.camera_height > 0:
         raise InputError("--camera-height", f"expected a positive height in metres, got {args.camera_height}")
@@ -63,7 +63,7 @@ def _options(args):
 
 
 def _finish(src, args, t0) -> int:
-    from .package import write_package
+    from ..importers.package import write_package
 
     info = write_package(src, _options(args))
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
@@ -76,7 +76,7 @@ def _finish(src, args, t0) -> int:
 
 
 def _colmap(args) -> int:
-    from .colmap import read_colmap
+    from ..importers.colmap import read_colmap
 
     t0 = time.perf_counter()
     _options(args)
@@ -85,7 +85,7 @@ def _colmap(args) -> int:
 
 
 def _nerfstudio(args) -> int:
-    from .nerfstudio import read_nerfstudio
+    from ..importers.nerfstudio import read_nerfstudio
 
     t0 = time.perf_counter()
     _options(args)
@@ -94,7 +94,7 @@ def _nerfstudio(args) -> int:
 
 
 def _gs(args) -> int:
-    from .gs_trainer import read_gs_output
+    from ..importers.gs_trainer import read_gs_output
 
     t0 = time.perf_counter()
     _options(args)

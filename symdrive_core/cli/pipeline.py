@@ -7,7 +7,7 @@ FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are l
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option, device_arg
+    from . import add_external_assets_option, device_arg
 
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -20,7 +20,7 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
-    p.add_argument("--no-refine", action="store_true")
+    p.add_argument("--no-refine", action="store_true", help="run without 3DGS refinement")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
@@ -31,17 +31,16 @@ def add_commands(sub) -> None:
     p = sub.add_parser("batch", help="run many scene packages, in-process or on a Ray cluster")
     p.add_argument("packages", nargs="+", help="scene package directories or manifest.json files")
     p.add_argument("--out", required=True, help="output root; each scene gets a subdirectory")
-    p.add_argument("--executor", choices=["local", "ray"], default="local")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local: the scenes one after another in this process; ray: tasks on a Ray cluster")
     p.add_argument("--address", help="Ray cluster address (default: start a local one)")
-    p.add_argument("--frames-per-task", type=int, default=4)
+    p.add_argument("--frames-per-task", type=int, default=4, help="frames rendered per Ray task (default 4)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_external_assets_option(p)
     p.set_defaults(func=_batch)
 
-    from .render_command import add_render_command
-
-    add_render_command(sub)
+    _add_render_command(sub)
 
     p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
     p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
@@ -61,9 +60,9 @@ def add_commands(sub) -> None:
 
 
 def _plan(args) -> int:
-    from ..cli import print_json
+    from ..pipeline.plan import PlanOptions, format_plan, make_plan
     from ..scene import load_manifest
-    from .plan import PlanOptions, format_plan, make_plan
+    from . import print_json
 
     plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
                      PlanOptions(refine=not args.no_refine))
@@ -75,9 +74,9 @@ def _plan(args) -> int:
 
 
 def _run(args) -> int:
-    from .plan import PlanOptions
-    from .run import run_scene
-    from .stages import StageOptions
+    from ..pipeline.plan import PlanOptions
+    from ..pipeline.run import run_scene
+    from ..pipeline.stages import StageOptions
 
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
     report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
@@ -90,7 +89,7 @@ def _run(args) -> int:
 
 
 def _batch(args) -> int:
-    from .batch import run_batch
+    from ..pipeline.batch import run_batch
 
     reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
                         frames_per_task=args.frames_per_task, device=args.device, force=args.force,
@@ -102,10 +101,10 @@ def _batch(args) -> int:
 
 
 def _accuracy_time(args) -> int:
+    from ..pipeline.accuracy_time import format_table, run_settings, write_outputs
+    from ..pipeline.demo import DEMO_PACKAGE
+    from ..pipeline.knobs import WHY_DEFAULTS, package_settings
     from ..scene import load_manifest
-    from .accuracy_time import format_table, run_settings, write_outputs
-    from .demo import DEMO_PACKAGE
-    from .knobs import WHY_DEFAULTS, package_settings
 
     manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)
     settings, skipped = package_settings(manifest, quick=args.quick)
@@ -120,10 +119,39 @@ def _accuracy_time(args) -> int:
 
 
 def _demo(args) -> int:
-    from .demo import run_demo
+    from ..pipeline.demo import run_demo
 
     report = run_demo(args.out, quick=args.quick, progress=not args.quiet, force=args.force)
     print(f"demo finished in {report['demo_seconds']} s: {args.out}/report.md, {args.out}/report.json")
     for key, rows in report["metrics"].items():
         print(f"  {key}: {rows}")
+    return 0
+
+
+def _add_render_command(sub) -> None:
+    from . import add_external_assets_option, device_arg
+
+    p = sub.add_parser("render", help="render one camera's frames of a scene package (background and actors) "
+                                      "as PNGs, a quick preview without a run")
+    p.add_argument("package", help="scene package directory or its manifest.json")
+    p.add_argument("--camera", required=True, help="camera name in the manifest")
+    p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
+    p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
+    p.add_argument("--width", type=int, help="output width (default: the camera's; aspect kept if only "
+                                             "--height is given)")
+    p.add_argument("--height", type=int, help="output height (default: the camera's)")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_external_assets_option(p)
+    p.set_defaults(func=_render)
+
+
+def _render(args) -> int:
+    from ..pipeline.preview import render_package
+
+    paths = render_package(args.package, args.camera, args.frames, args.out, width=args.width, height=args.height,
+                           device=args.device, allow_external=args.allow_external_assets,
+                           progress=not args.quiet)
+    for p in paths:
+        print(p)
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("insert", help="insert a vehicle actor into the background splats: frames, masks, regions")
     p.add_argument("package", help="scene package directory or manifest.json")
@@ -25,7 +25,8 @@ def add_commands(sub) -> None:
     p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
     p.add_argument("--harmonize-samples", type=int, help="harmonizations averaged per frame (default 4)")
     p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
-    p.add_argument("--finetune-steps", type=int, default=300)
+    p.add_argument("--finetune-steps", type=int, default=300,
+                   help="colour/opacity fine-tune steps per vehicle (default 300)")
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
     p.add_argument("--assets-out", help="write the fine-tuned assets (splat PLY) here")
@@ -37,8 +38,8 @@ def add_commands(sub) -> None:
 def _insert(args) -> int:
     from pathlib import Path
 
+    from ..insertion.render_actor import insert_actor
     from ..scene import load_manifest
-    from .render_actor import insert_actor
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     out = Path(args.out) if args.out else manifest.root / manifest.output / "insert"
@@ -52,19 +53,19 @@ def _insert_eval(args) -> int:
     import json
     from pathlib import Path
 
-    from ..cli import print_json
+    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..insertion.features import load_extractor
     from ..io.atomic import write_text_atomic
     from ..io.ply import read_splats
     from ..optim.finetune import FinetuneConfig
     from ..scene import load_manifest
-    from .evaluate import InsertionConfig, evaluate_insertion
-    from .features import load_extractor
+    from . import print_json
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     harmonizer = None
     if not args.no_harmonize:
         from ..diffusion.models import load_restorer
-        from .harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
+        from ..insertion.harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
 
         harmonizer = restorer_harmonizer(load_restorer(weights=args.weights), steps=args.steps,
                                          samples=args.harmonize_samples or DEFAULT_SAMPLES)

@@ -1,7 +1,9 @@
 """``symdrive`` command line: thin dispatch to the library.
 
-Each area registers its own subcommands from a light ``commands`` module (heavy imports happen
-inside the handlers, so ``symdrive plan`` never loads torch or a diffusion model). Errors in the
+Each area registers its own subcommands from a light module of this package (``cli/optim.py``,
+``cli/diffusion.py``, ...; heavy imports happen inside the handlers, so ``symdrive plan`` never
+loads torch or a diffusion model). The library never imports this package; defaults live in the
+library (``diffusion/defaults.py``, the config dataclasses) and the options read them from there. Errors in the
 user's input print one line naming the file and field and exit with status 2.
 """
 
@@ -14,18 +16,18 @@ import json
 import os
 import sys
 
-from .errors import SymDriveError
+from ..errors import SymDriveError
 
 # Modules that add subcommands; each defines ``add_commands(subparsers)``.
 COMMAND_MODULES = [
-    "symdrive_core.commands",
-    "symdrive_core.optim.commands",
-    "symdrive_core.diffusion.commands",
-    "symdrive_core.traffic.commands",
-    "symdrive_core.insertion.commands",
-    "symdrive_core.pipeline.commands",
-    "symdrive_core.sim.commands",
-    "symdrive_core.importers.commands",
+    "symdrive_core.cli.foundation",
+    "symdrive_core.cli.optim",
+    "symdrive_core.cli.diffusion",
+    "symdrive_core.cli.traffic",
+    "symdrive_core.cli.insertion",
+    "symdrive_core.cli.pipeline",
+    "symdrive_core.cli.sim",
+    "symdrive_core.cli.importers",
 ]
 
 
@@ -98,6 +100,3 @@ def _version() -> str:
 def print_json(obj) -> None:
     print(json.dumps(obj, indent=1))
 
-
-if __name__ == "__main__":
-    sys.exit(main())

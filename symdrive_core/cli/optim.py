@@ -6,7 +6,7 @@ from pathlib import Path
 
 
 def add_commands(sub) -> None:
-    from ..cli import add_external_assets_option
+    from . import add_external_assets_option
 
     p = sub.add_parser("reconstruct", help="3DGS reconstruction of a scene package's background (CPU)")
     p.add_argument("package", help="scene package directory or its manifest.json")
@@ -17,7 +17,7 @@ def add_commands(sub) -> None:
     p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight (default 0: off)")
     p.add_argument("--max-gaussians", type=int, default=None, help="cap for densification (default 200000)")
     p.add_argument("--max-init-points", type=int, default=None, help="point-cloud subset to start from (default 30000)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the reconstruction (default 0)")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats at the result")
@@ -28,8 +28,8 @@ def add_commands(sub) -> None:
 def _reconstruct(args) -> int:
     import json
 
+    from ..optim.reconstruct import ReconstructConfig, reconstruct
     from ..scene import load_manifest
-    from .reconstruct import ReconstructConfig, reconstruct
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(seed=args.seed)
@@ -43,7 +43,7 @@ def _reconstruct(args) -> int:
     metrics = result.metrics
     if args.lateral:
         from ..io.atomic import write_text_atomic
-        from .evaluate import evaluate_lateral
+        from ..optim.evaluate import evaluate_lateral
 
         metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
         write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")

@@ -1,11 +1,10 @@
-"""``symdrive render``: one camera's frames of a scene package, background and every posed actor.
+"""One camera's frames of a scene package, background and every posed actor: what ``symdrive
+render`` writes (its options are in ``cli/pipeline.py``) and the Blender add-on's preview shows.
 
-A quick look at a scene (the Blender add-on's preview uses it), not a run: no plan, no stages,
-no masks. Frames are written as ``render/<camera>/<frame:06d>.png`` inside ``--out``, every
-path built by :class:`OutputTree` and every file written atomically. ``--width``/``--height``
-render at another size than the package's, the intrinsics scaled to match (aspect kept when
-only one is given).
-"""
+A quick look at a scene, not a run: no plan, no stages, no masks. Frames are written as
+``render/<camera>/<frame:06d>.png`` inside ``--out``, every path built by :class:`OutputTree`
+and every file written atomically. ``--width``/``--height`` render at another size than the
+package's, the intrinsics scaled to match (aspect kept when only one is given)."""
 
 from __future__ import annotations
 
@@ -101,30 +100,3 @@ def render_package(package, camera: str, frames: str, out, *, width: int | None 
     for fi, rgb in tqdm(images, total=len(frame_list), desc="render", unit="frame", disable=not progress):
         written.append(write_image(tree.frame("render", camera, fi), rgb))
     return written
-
-
-def add_render_command(sub) -> None:
-    from ..cli import add_external_assets_option, device_arg
-
-    p = sub.add_parser("render", help="render one camera's frames of a scene package (background and actors) "
-                                      "as PNGs, a quick preview without a run")
-    p.add_argument("package", help="scene package directory or its manifest.json")
-    p.add_argument("--camera", required=True, help="camera name in the manifest")
-    p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
-    p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
-    p.add_argument("--width", type=int, help="output width (default: the camera's; aspect kept if only "
-                                             "--height is given)")
-    p.add_argument("--height", type=int, help="output height (default: the camera's)")
-    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    add_external_assets_option(p)
-    p.set_defaults(func=_render)
-
-
-def _render(args) -> int:
-    paths = render_package(args.package, args.camera, args.frames, args.out, width=args.width, height=args.height,
-                           device=args.device, allow_external=args.allow_external_assets,
-                           progress=not args.quiet)
-    for p in paths:
-        print(p)
-    return 0
