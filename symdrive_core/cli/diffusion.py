@@ -233,9 +233,9 @@ def _train(args) -> int:
 
 
 def _train_flux(args) -> int:
-    from . import print_json
-    from ..errors import InputError
     from ..diffusion.flux_train import FluxTrainConfig, train_flux_lora
+    from ..errors import InputError
+    from . import print_json
 
     builtin_only = ("ema", "width", "t_max", "full_fraction", "output", "init")
     for name in builtin_only:
