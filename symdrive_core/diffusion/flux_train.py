@@ -31,6 +31,7 @@ from ..errors import InputError
 from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
 from .flux import LORA_TARGETS, FluxRestorer, add_lora, save_lora
+from .train import load_optimizer_tensors, optimizer_tensors
 
 CHECKPOINT = "flux_checkpoint.safetensors"
 LORA = "restorer_lora.safetensors"
@@ -140,8 +141,7 @@ def save_checkpoint(path: Path, transformer, opt, step: int, losses: list[float]
     from safetensors.torch import save_file
 
     tensors = {f"lora.{k}": v for k, v in get_peft_model_state_dict(transformer).items()}
-    for i, st in opt.state_dict()["state"].items():
-        tensors |= {f"adam.{i}.{k}": v.reshape(-1) if k == "step" else v for k, v in st.items()}
+    tensors |= optimizer_tensors(opt)
     meta = {"step": str(step), "losses": json.dumps(losses), "config": json.dumps(asdict(cfg))}
     with atomic_path(path) as tmp:
         save_file({k: v.detach().float().contiguous().cpu() for k, v in tensors.items()}, str(tmp), metadata=meta)
@@ -169,16 +169,7 @@ def load_checkpoint(path: Path, transformer, opt, cfg: FluxTrainConfig) -> tuple
     result = set_peft_model_state_dict(transformer, state)
     if getattr(result, "unexpected_keys", None):
         raise InputError(path, f"LoRA keys the transformer lacks: {result.unexpected_keys[:3]}", "lora")
-    ost = opt.state_dict()
-    params = ost["param_groups"][0]["params"]
-    for i in params:
-        if f"adam.{i}.step" in t:
-            ost["state"][i] = {
-                "step": t[f"adam.{i}.step"].reshape(()),
-                "exp_avg": t[f"adam.{i}.exp_avg"],
-                "exp_avg_sq": t[f"adam.{i}.exp_avg_sq"],
-            }
-    opt.load_state_dict(ost)
+    load_optimizer_tensors(opt, t)
     return int(meta["step"]), json.loads(meta["losses"])
 
 

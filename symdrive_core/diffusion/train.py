@@ -92,8 +92,7 @@ def save_checkpoint(
 
     tensors = {f"model.{k}": v for k, v in net.state_dict().items()}
     tensors |= {f"ema.{k}": v for k, v in ema.state_dict().items()}
-    for i, st in opt.state_dict()["state"].items():
-        tensors |= {f"adam.{i}.{k}": v.reshape(-1) if k == "step" else v for k, v in st.items()}
+    tensors |= optimizer_tensors(opt)
     meta = {"step": str(step), "losses": json.dumps(losses), "config": json.dumps(asdict(cfg))}
     with atomic_path(path) as tmp:
         save_file({k: v.detach().contiguous() for k, v in tensors.items()}, str(tmp), metadata=meta)
@@ -107,16 +106,27 @@ def load_checkpoint(path: Path, net: UNet, ema: UNet, opt: torch.optim.Adam) -> 
         t = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 (not a dict)
     net.load_state_dict({k[6:]: v for k, v in t.items() if k.startswith("model.")})
     ema.load_state_dict({k[4:]: v for k, v in t.items() if k.startswith("ema.")})
-    state = opt.state_dict()
-    for i in range(len(opt.param_groups[0]["params"])):
-        if f"adam.{i}.step" in t:
-            state["state"][i] = {
-                "step": t[f"adam.{i}.step"].reshape(()),
-                "exp_avg": t[f"adam.{i}.exp_avg"],
-                "exp_avg_sq": t[f"adam.{i}.exp_avg_sq"],
-            }
-    opt.load_state_dict(state)
+    load_optimizer_tensors(opt, t)
     return int(meta["step"]), json.loads(meta["losses"])
+
+
+def optimizer_tensors(opt: torch.optim.Optimizer) -> dict[str, torch.Tensor]:
+    """Adam's per-parameter state as flat named tensors (``adam.<i>.<key>``): safetensors
+    checkpoints hold tensors only, and resuming needs the moments to continue exactly."""
+    out: dict[str, torch.Tensor] = {}
+    for i, st in opt.state_dict()["state"].items():
+        out |= {f"adam.{i}.{k}": v.reshape(-1) if k == "step" else v for k, v in st.items()}
+    return out
+
+
+def load_optimizer_tensors(opt: torch.optim.Optimizer, t: dict[str, torch.Tensor]) -> None:
+    """The inverse of :func:`optimizer_tensors`, into ``opt`` (parameters without state stay fresh)."""
+    state = opt.state_dict()
+    for i in state["param_groups"][0]["params"]:
+        if f"adam.{i}.step" in t:
+            state["state"][i] = {"step": t[f"adam.{i}.step"].reshape(()), "exp_avg": t[f"adam.{i}.exp_avg"],
+                                 "exp_avg_sq": t[f"adam.{i}.exp_avg_sq"]}
+    opt.load_state_dict(state)
 
 
 def train_restorer(
