@@ -66,6 +66,27 @@ def add_external_assets_option(p: argparse.ArgumentParser) -> None:
                         "an add-on export without --copy-assets needs; only for packages you trust")
 
 
+def positive_int(value: str) -> int:
+    """A count that must be at least 1 (steps, samples, iterations, sizes): 0 or less is an error,
+    not a silent fall-back to the default."""
+    return _int_at_least(value, 1)
+
+
+def count_int(value: str) -> int:
+    """A count that may be 0 (warm-up steps, fine-tune iterations, vehicles)."""
+    return _int_at_least(value, 0)
+
+
+def _int_at_least(value: str, low: int) -> int:
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {value!r}") from None
+    if n < low:
+        raise argparse.ArgumentTypeError(f"must be at least {low}, got {n}")
+    return n
+
+
 def device_arg(value: str) -> str:
     """``--device``: a torch device this machine has (cpu, cuda, cuda:N), checked up front."""
     if value == "cpu":

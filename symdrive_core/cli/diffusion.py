@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
+from . import count_int, positive_int
 
 
 def _floats(text: str) -> list[float]:
@@ -59,7 +60,7 @@ def add_commands(sub) -> None:
         "cameras become degraded starts (default: none)",
     )
     p.add_argument(
-        "--cycle-iters", type=int, default=CYCLE_DEFAULTS[0], help="iterations of each cycle reconstruction"
+        "--cycle-iters", type=positive_int, default=CYCLE_DEFAULTS[0], help="iterations of each cycle reconstruction"
     )
     p.add_argument(
         "--cycle-max-gaussians",
@@ -75,15 +76,15 @@ def add_commands(sub) -> None:
     p.add_argument("pairs", type=Path, help="pairs file from `symdrive make-pairs`")
     p.add_argument("--out", type=Path, required=True, help="folder for weights, record and checkpoint")
     for flag, kind, text in (
-        ("--steps", int, "training steps (default 3000)"),
-        ("--batch", int, "crops per step (default 8)"),
-        ("--crop", int, "square crop size in pixels (default 64)"),
+        ("--steps", positive_int, "training steps (default 3000)"),
+        ("--batch", positive_int, "crops per step (default 8)"),
+        ("--crop", positive_int, "square crop size in pixels (default 64)"),
         ("--lr", float, "peak learning rate (default 4e-4)"),
         ("--ema", float, "EMA decay of the shipped weights (default 0.999)"),
-        ("--width", int, "UNet base width (default 24)"),
+        ("--width", positive_int, "UNet base width (default 24)"),
         ("--seed", int, "seed of every batch and noise draw (default 0)"),
-        ("--threads", int, "torch threads (default 1)"),
-        ("--checkpoint-every", int, "steps between checkpoints (default 250)"),
+        ("--threads", positive_int, "torch threads (default 1)"),
+        ("--checkpoint-every", positive_int, "steps between checkpoints (default 250)"),
         (
             "--t-max",
             float,
@@ -107,12 +108,12 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-transformer", help="flux: FLUX.1-dev transformer folder (diffusers layout)")
     p.add_argument("--flux-vae", help="flux: FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--prompt", help="flux: prompt-embedding .safetensors from `symdrive flux-prompt`")
-    p.add_argument("--rank", type=int, help="flux: LoRA rank (default 128, the paper's)")
+    p.add_argument("--rank", type=positive_int, help="flux: LoRA rank (default 128, the paper's)")
     p.add_argument("--lora-alpha", type=float, help="flux: LoRA alpha (default: the rank)")
     p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
                    help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
-    p.add_argument("--grad-accum", type=int, help="flux: gradient accumulation steps (default 1)")
-    p.add_argument("--warmup", type=int, help="learning-rate warm-up steps (default 100)")
+    p.add_argument("--grad-accum", type=positive_int, help="flux: gradient accumulation steps (default 1)")
+    p.add_argument("--warmup", type=count_int, help="learning-rate warm-up steps (default 100)")
     p.add_argument("--mixed-precision", choices=["auto", "no", "bf16", "fp16"],
                    help="flux: auto (default) is bf16 on CUDA, float32 on the CPU")
     p.add_argument("--no-gradient-checkpointing", action="store_true", help="flux: keep all activations")
@@ -124,7 +125,7 @@ def add_commands(sub) -> None:
                         "as in FLUX.1-dev")
     p.add_argument("--out", type=Path, required=True, help=".safetensors to write")
     p.add_argument("--text", help="the prompt (default: diffusion.flux_prompt.DEFAULT_PROMPT)")
-    p.add_argument("--max-length", type=int, default=512, help="T5 tokens (default 512, FLUX.1-dev's)")
+    p.add_argument("--max-length", type=positive_int, default=512, help="T5 tokens (default 512, FLUX.1-dev's)")
     p.add_argument("--device", default="cpu", help="cpu or cuda")
     p.set_defaults(func=_flux_prompt)
 
@@ -143,10 +144,10 @@ def add_commands(sub) -> None:
     p.add_argument("--step", type=float, default=0.5, help="chain step d in metres (0 = single-view)")
     p.add_argument("--frames", type=_ints,
                    help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
-    p.add_argument("--steps", type=int, help="sampler steps (default: 5 builtin, 50 flux)")
-    p.add_argument("--n-start", type=int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
+    p.add_argument("--steps", type=positive_int, help="sampler steps (default: 5 builtin, 50 flux)")
+    p.add_argument("--n-start", type=count_int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
     p.add_argument("--seed", type=int, default=0, help="sampler noise seed (default 0)")
-    p.add_argument("--samples", type=int,
+    p.add_argument("--samples", type=positive_int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         "times the work (default: 8 builtin, 1 flux)")
     p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
@@ -163,7 +164,7 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=int, default=900, help="refinement iterations of --refine (default 900)")
+    p.add_argument("--refine-iters", type=positive_int, default=900, help="refinement iterations of --refine (default 900)")
     p.add_argument("--refine-frames", type=_ints,
                    help="recorded frames whose restored lateral views --refine trains on (default: all)")
     p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
@@ -173,7 +174,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-vae", help="FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
-    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
     add_external_assets_option(p)
     p.set_defaults(func=_restore)
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+from . import count_int, positive_int
+
 
 def _common(p, images: bool) -> None:
     if images:
@@ -16,7 +18,7 @@ def _common(p, images: bool) -> None:
     g.add_argument("--scale", type=float, help="metres per source unit (instead of --camera-height)")
     p.add_argument("--up", help="the world's up direction x,y,z in the source frame (default: fitted ground "
                                 "plane, checked against the cameras' mean up vector)")
-    p.add_argument("--heldout-every", type=int, metavar="N",
+    p.add_argument("--heldout-every", type=positive_int, metavar="N",
                    help="hold every N-th frame out of training for evaluation (N=5: frames 2, 7, 12, ...)")
     p.add_argument("--copy-images", action="store_true",
                    help="copy the images into the package (default: reference them, relative to the package)")
@@ -40,7 +42,7 @@ def add_commands(sub) -> None:
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
-    p.add_argument("--iteration", type=int, help="point_cloud/iteration_N to use (default: the newest)")
+    p.add_argument("--iteration", type=count_int, help="point_cloud/iteration_N to use (default: the newest)")
     p.set_defaults(func=_gs)
 
 

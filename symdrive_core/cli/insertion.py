@@ -3,6 +3,8 @@ insert-eval`` (insertion metrics on the package's held-out placements)."""
 
 from __future__ import annotations
 
+from . import count_int, positive_int
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
@@ -14,7 +16,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out", help="output directory (default: <package output>/insert)")
     p.add_argument("--flip-forward", action="store_true", help="turn the asset half a turn (forward = -X assets)")
     p.add_argument("--from-mesh", action="store_true", help="sample the asset's mesh instead of its splat PLY")
-    p.add_argument("--samples", type=int, default=12000, help="Gaussians sampled from a mesh")
+    p.add_argument("--samples", type=positive_int, default=12000, help="Gaussians sampled from a mesh")
     add_external_assets_option(p)
     p.set_defaults(func=_insert)
 
@@ -22,10 +24,10 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package with ground_truth.insertion")
     p.add_argument("--background", required=True, help="background splat PLY (the reconstruction)")
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
-    p.add_argument("--steps", type=int, help="harmonization sampler steps (default 10)")
-    p.add_argument("--harmonize-samples", type=int, help="harmonizations averaged per frame (default 4)")
+    p.add_argument("--steps", type=positive_int, help="harmonization sampler steps (default 10)")
+    p.add_argument("--harmonize-samples", type=positive_int, help="harmonizations averaged per frame (default 4)")
     p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
-    p.add_argument("--finetune-steps", type=int, default=300,
+    p.add_argument("--finetune-steps", type=count_int, default=300,
                    help="colour/opacity fine-tune steps per vehicle (default 300)")
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")

@@ -4,19 +4,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from . import count_int, positive_int
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
 
     p = sub.add_parser("reconstruct", help="3DGS reconstruction of a scene package's background (CPU)")
     p.add_argument("package", help="scene package directory or its manifest.json")
-    p.add_argument("--iters", type=int, default=None, help="training iterations (default 3000)")
+    p.add_argument("--iters", type=positive_int, default=None, help="training iterations (default 3000)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default PACKAGE/reconstruction)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint if present")
-    p.add_argument("--sh-degree", type=int, default=None, help="SH degree of the result (default 1)")
+    p.add_argument("--sh-degree", type=count_int, default=None, help="SH degree of the result (default 1)")
     p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight (default 0: off)")
-    p.add_argument("--max-gaussians", type=int, default=None, help="cap for densification (default 200000)")
-    p.add_argument("--max-init-points", type=int, default=None, help="point-cloud subset to start from (default 30000)")
+    p.add_argument("--max-gaussians", type=positive_int, default=None, help="cap for densification (default 200000)")
+    p.add_argument("--max-init-points", type=positive_int, default=None, help="point-cloud subset to start from (default 30000)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the reconstruction (default 0)")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",

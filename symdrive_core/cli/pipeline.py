@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from . import positive_int
+
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
 
 
@@ -34,7 +36,7 @@ def add_commands(sub) -> None:
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local: the scenes one after another in this process; ray: tasks on a Ray cluster")
     p.add_argument("--address", help="Ray cluster address (default: start a local one)")
-    p.add_argument("--frames-per-task", type=int, default=4, help="frames rendered per Ray task (default 4)")
+    p.add_argument("--frames-per-task", type=positive_int, default=4, help="frames rendered per Ray task (default 4)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_external_assets_option(p)
@@ -137,9 +139,9 @@ def _add_render_command(sub) -> None:
     p.add_argument("--camera", required=True, help="camera name in the manifest")
     p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
     p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
-    p.add_argument("--width", type=int, help="output width (default: the camera's; aspect kept if only "
+    p.add_argument("--width", type=positive_int, help="output width (default: the camera's; aspect kept if only "
                                              "--height is given)")
-    p.add_argument("--height", type=int, help="output height (default: the camera's)")
+    p.add_argument("--height", type=positive_int, help="output height (default: the camera's)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_external_assets_option(p)

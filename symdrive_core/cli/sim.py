@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from . import count_int, positive_int
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
@@ -10,7 +12,7 @@ def add_commands(sub) -> None:
                                    "writes report.json (PDM scores) and a video per episode")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--agent", default="replay", help="replay, idm, cut-in, or MODULE:CLASS (default replay)")
-    p.add_argument("--episodes", type=int, default=1, help="episodes to run (default 1)")
+    p.add_argument("--episodes", type=positive_int, default=1, help="episodes to run (default 1)")
     p.add_argument("--seed", type=int, default=0, help="episode i runs from seed S + i")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
@@ -18,7 +20,7 @@ def add_commands(sub) -> None:
     p.add_argument("--time-limit", type=float, help="seconds per episode (default: twice the recorded drive)")
     p.add_argument("--traffic", choices=["replay", "sumo"], default="replay",
                    help="actors on their recorded poses, or SUMO vehicles reacting to the ego")
-    p.add_argument("--vehicles", type=int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
+    p.add_argument("--vehicles", type=count_int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
     p.add_argument("--action", choices=["accel_steer", "waypoint"], default="accel_steer",
                    help="the agent's action: [acceleration, steering] or [x, y, speed] (ego-frame target point)")
     p.add_argument("--restore", action="store_true",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from . import positive_int
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
@@ -19,7 +21,7 @@ def add_commands(sub) -> None:
                                                "default: the asset folders inside the package")
     p.add_argument("--out", help="output package directory (default: PACKAGE-traffic beside the package)")
     p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
-    p.add_argument("--lanes", type=int, default=2, help="lanes of a --road road (default 2)")
+    p.add_argument("--lanes", type=positive_int, default=2, help="lanes of a --road road (default 2)")
     p.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit for SUMO in seconds")
     add_external_assets_option(p)
     p.set_defaults(func=_traffic)

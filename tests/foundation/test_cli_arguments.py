@@ -44,9 +44,7 @@ def test_a_bad_argument_exits_2_naming_the_command(tmp_path, capsys, argv, comma
 @pytest.mark.parametrize("argv, command, says", [
     # checked against the package after parsing: exit 2 through SymDriveError, same prefix
     (["render", PKG, "--camera", "front", "--frames", "0:999", "--out", "OUT"], "render", "--frames"),
-    (["render", PKG, "--camera", "front", "--width", "0", "--out", "OUT"], "render", "--width/--height"),
     (["render", PKG, "--camera", "nope", "--out", "OUT"], "render", "no camera named 'nope'"),
-    (["sim", PKG, "--episodes", "0", "--out", "OUT"], "sim", "--episodes"),
     (["sim", PKG, "--size", "0x3", "--out", "OUT"], "sim", "--size"),
     (["sim", PKG, "--dt", "0", "--out", "OUT"], "sim", "--dt"),
     (["traffic", PKG, "--density", "1", "--seconds", "1", "--road", "bogus"], "traffic", "--road"),
@@ -84,3 +82,22 @@ def test_every_command_and_option_has_help():
             if not (action.help or "").strip() or action.help == argparse.SUPPRESS:
                 missing.append(f"{path} {'/'.join(action.option_strings) or action.dest}")
     assert missing == [], f"options without help: {missing}"
+
+
+@pytest.mark.parametrize("argv", [
+    ["restore", "PKG", "--out", "OUT", "--steps", "0"],
+    ["restore", "PKG", "--out", "OUT", "--samples", "-1"],
+    ["reconstruct", "PKG", "--iters", "-5"],
+    ["batch", "PKG", "--out", "OUT", "--frames-per-task", "0"],
+    ["train-restorer", "PAIRS", "--out", "OUT", "--batch", "0"],
+    ["sim", "PKG", "--out", "OUT", "--vehicles", "-2"],
+    ["sim", "PKG", "--out", "OUT", "--episodes", "0"],
+    ["render", "PKG", "--camera", "front", "--out", "OUT", "--width", "0"],
+])
+def test_counts_below_their_minimum_exit_2_naming_the_option(capsys, argv):
+    """A count of 0 (or less) is an error naming the option, not a silent fall-back to the default."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err
+    option = argv[-2]  # the offending option is the last one given
+    assert exc.value.code == 2 and f"symdrive {argv[0]}: error: argument {option}" in err and "at least" in err
