@@ -44,7 +44,7 @@ def _insert(args) -> int:
     from ..scene import load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
-    out = Path(args.out) if args.out else manifest.root / manifest.output / "insert"
+    out = Path(args.out) if args.out else manifest.output_dir() / "insert"
     n = insert_actor(manifest, args.actor, out, background=args.background, flip=args.flip_forward,
                      from_mesh=args.from_mesh, n_samples=args.samples)
     print(f"wrote {n} frame(s) of {args.actor} to {out}")

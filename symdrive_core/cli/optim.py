@@ -31,7 +31,7 @@ def _reconstruct(args) -> int:
     import json
 
     from ..optim.reconstruct import ReconstructConfig, reconstruct
-    from ..scene import load_manifest
+    from ..scene import ManifestError, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(seed=args.seed)
@@ -41,6 +41,9 @@ def _reconstruct(args) -> int:
     if args.max_gaussians is not None:
         cfg.densify.max_gaussians = args.max_gaussians
     out = args.out or manifest.root / "reconstruction"
+    if args.out is None and not is_inside(out, manifest.root):  # a link shipped in the package
+        raise ManifestError(manifest.path or manifest.root, "'reconstruction' leads out of the package (a link); "
+                            "pass --out", "reconstruction")
     result = reconstruct(manifest, out, cfg, resume=args.resume)
     metrics = result.metrics
     if args.lateral:

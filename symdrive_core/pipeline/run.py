@@ -91,7 +91,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
     manifest = load_manifest(package, allow_external=allow_external)
     check_files(manifest)
     options, stage_options = options or PlanOptions(), stage_options or StageOptions()
-    tree = OutputTree(Path(out_dir) if out_dir is not None else manifest.root / manifest.output)
+    tree = OutputTree(Path(out_dir) if out_dir is not None else manifest.output_dir())
     with OutputLock(tree.root) if lock else contextlib.nullcontext():
         state, plan = open_output(manifest, tree, options, stage_options, device, force)
         report = Report(manifest.name, device)

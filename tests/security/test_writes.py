@@ -63,3 +63,24 @@ def test_a_link_inside_the_output_leading_out_is_not_written_through(tmp_path):
 def test_output_tree_refuses_components_that_are_not_names(tmp_path, parts):
     with pytest.raises(OutputError):
         OutputTree(tmp_path).path(*parts)
+
+
+def test_an_output_folder_linked_out_of_the_package_is_refused(tmp_path, capsys):
+    """The package's own ``output`` is a link to a folder elsewhere: a run without --out refuses
+    it rather than writing through it."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    pkg = write_package(tmp_path / "pkg")
+    (pkg.parent / "output").symlink_to(elsewhere)
+    assert main(["run", str(pkg), "--quiet"]) == 2
+    assert "output" in capsys.readouterr().err
+    assert list(elsewhere.iterdir()) == []
+
+
+def test_reconstruct_does_not_write_through_a_link_the_package_ships(tmp_path, capsys):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    pkg = write_package(tmp_path / "pkg")
+    (pkg.parent / "reconstruction").symlink_to(elsewhere)
+    assert main(["reconstruct", str(pkg), "--iters", "1"]) == 2
+    assert "reconstruction" in capsys.readouterr().err and list(elsewhere.iterdir()) == []
