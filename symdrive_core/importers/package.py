@@ -13,6 +13,8 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..gaussians import Gaussians
+from ..io import link_or_copy
+from ..scene import is_inside
 from .frames import Grouped, split_heldout
 from .ground import alignment, fit_ground
 from .similarity import apply_camera, apply_points, transform_gaussians
@@ -74,22 +76,6 @@ def _check_images(g: Grouped) -> None:
                                  f"{v.width}x{v.height}", v.where)
 
 
-def _link_or_copy(src: Path, dst: Path) -> None:
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        os.link(src, dst)
-    except OSError:
-        shutil.copy2(src, dst)
-
-
-def _inside(path: Path, folder: Path) -> bool:
-    try:
-        path.resolve().relative_to(folder.resolve())
-        return True
-    except ValueError:
-        return False
-
-
 def write_package(src: Source, opt: Options) -> dict:
     """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
     summary (frames, cameras, transform, where the images are, whether the package reads files
@@ -131,9 +117,9 @@ def write_package(src: Source, opt: Options) -> dict:
                         dst = tmp / rel
                         dst.parent.mkdir(parents=True, exist_ok=True)
                         shutil.copy2(v.image, dst)
-                    elif _inside(v.image, out):
+                    elif is_inside(v.image, out):
                         rel = v.image.resolve().relative_to(out.resolve()).as_posix()
-                        _link_or_copy(v.image, tmp / rel)
+                        link_or_copy(v.image, tmp / rel)
                     else:
                         rel = Path(os.path.relpath(v.image.resolve(), out.resolve())).as_posix()
                         external = True

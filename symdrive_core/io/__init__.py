@@ -7,9 +7,19 @@ the reader forever and a device such as ``/dev/zero`` never ends.
 from __future__ import annotations
 
 import os
+import shutil
 import stat
 
 from ..errors import InputError
+
+
+def link_or_copy(src, dst) -> None:
+    """Place ``src`` at ``dst`` as a hard link (no bytes copied, same file system), else a copy."""
+    os.makedirs(os.path.dirname(os.fspath(dst)) or ".", exist_ok=True)
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
 
 
 def _describe_mode(mode: int) -> str:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io import link_or_copy
 from ..io.atomic import atomic_directory
 from ..scene import CameraFrame, Manifest, check_files, parse_manifest
 from .actors import traffic_actors
@@ -88,12 +89,7 @@ def _bring_in_outside_files(manifest: Manifest, tmp: Path) -> None:
         src = (manifest.root / rel).resolve()
         if src not in placed:
             placed[src] = f"assets/{len(placed):04d}_{src.name}"
-            dst = tmp / placed[src]
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                os.link(src, dst)
-            except OSError:
-                shutil.copy2(src, dst)
+            link_or_copy(src, tmp / placed[src])
         return placed[src]
 
     manifest.background_splats = bring(manifest.background_splats)
