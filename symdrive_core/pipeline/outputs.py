@@ -39,6 +39,7 @@ class OutputTree:
         if root.exists() and not root.is_dir():
             raise OutputError(f"{root}: --out names a file, not a folder")
         self.root = root
+        self.real_root = root.resolve()  # links on the way resolved once: every check compares to it
         self._claimed: set[str] | None = None
 
     # ---------------------------------------------------------------- paths
@@ -47,8 +48,7 @@ class OutputTree:
         """``root/parts...`` for writing; refused (OutputError) if it would lie outside the root."""
         rel = _relative(self.root, parts)
         target = self.root.joinpath(*rel.parts)
-        real_root = self.root.resolve()
-        if not target.resolve().is_relative_to(real_root):  # a symlink inside pointing out
+        if not target.resolve().is_relative_to(self.real_root):  # a symlink inside pointing out
             raise OutputError(f"{self.root}: refusing to write outside the output folder: {rel}")
         self._claim(rel.as_posix())
         return target
@@ -118,10 +118,9 @@ class OutputTree:
         and nothing else; returns how many entries went."""
         removed = 0
         folders = {(self.root / c.rstrip("/")).parent for c in self.claimed()}
-        real_root = self.root.resolve()
         for rel in sorted(self.claimed(), key=len, reverse=True):
             p = self.root / rel.rstrip("/")
-            if not _inside(real_root, p):  # a journal line edited (or shipped) to point elsewhere
+            if not _inside(self.real_root, p):  # a journal line edited (or shipped) to point elsewhere
                 continue
             if p.is_symlink() or p.is_file():
                 p.unlink()
@@ -148,7 +147,7 @@ class OutputTree:
                                                                            if c.endswith("/")}
         removed = 0
         for d in parents:
-            if not d.is_dir() or d.is_symlink() or not _inside(self.root.resolve(), d / "x"):
+            if not d.is_dir() or d.is_symlink() or not _inside(self.real_root, d / "x"):
                 continue
             for entry in d.iterdir():
                 rel = entry.relative_to(self.root).as_posix()

@@ -31,7 +31,6 @@ from .state import RunState
 class RunContext:
     manifest: Manifest
     plan: Plan
-    out: Path
     tree: OutputTree
     state: RunState
     report: Report
@@ -95,7 +94,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
     with OutputLock(tree.root) if lock else contextlib.nullcontext():
         state, plan = open_output(manifest, tree, options, stage_options, device, force)
         report = Report(manifest.name, device)
-        ctx = RunContext(manifest, plan, tree.root, tree, state, report, device, progress, stage_options, Shared())
+        ctx = RunContext(manifest, plan, tree, state, report, device, progress, stage_options, Shared())
         for decision in plan.stages:
             name = decision.name
             if not decision.run:
