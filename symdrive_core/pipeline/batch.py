@@ -25,7 +25,7 @@ def _render_chunk(package: str, out: str, camera: str, frames: list[int], device
     """Render some frames of one scene into its output directory (a Ray task)."""
     from ..scene import load_manifest
     from .plan import make_plan
-    from .run import render_frames
+    from .scene_render import render_frames
 
     manifest = load_manifest(package, allow_external=allow_external)
     plan = make_plan(manifest)

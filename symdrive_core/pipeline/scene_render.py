@@ -15,12 +15,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from .. import conventions
 from ..errors import InputError
 from ..gaussians import Gaussians
+from ..io.images import write_image, write_mask
 from ..io.ply import read_splats
 from ..scene import Manifest
+from .outputs import ASSET_CACHE, OutputTree
+from .plan import Plan
 
 MESH_SAMPLES = 12000  # splats per mesh-only actor, as insertion.assets samples a mesh asset
 MESH_SEED = 0
@@ -159,3 +163,34 @@ class SceneRenderer:
         vehicles = union(render.instance.values()) if render.instance else np.zeros_like(occlusion, np.float64)
         rgb = darken(render.rgb, background.rgb, vehicles, occlusion, ratio)
         return replace(render, rgb=rgb, shadow=occlusion)
+
+
+def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: list[tuple[str, int]], device: str,
+                  progress: bool = True, background=None) -> int:
+    """Render (camera, frame) jobs whose outputs are missing into the output tree (RGB written last:
+    its presence marks the frame complete); returns how many were rendered. ``background``:
+    Gaussians to use instead of the manifest's (a reconstruction this run fitted)."""
+    out = out if isinstance(out, OutputTree) else OutputTree(out)
+    renderer = None
+    done = 0
+    casting = plan.stage("cast_shadow")
+    for cam, fi in tqdm(jobs, desc="render", unit="frame", disable=not progress):
+        rgb_path = out.frame("render", cam, fi)
+        if rgb_path.exists():
+            continue
+        if renderer is None:
+            renderer = SceneRenderer(manifest, device=device, asset_cache=out.folder(ASSET_CACHE),
+                                     background_gaussians=background)
+        frame = renderer.render(cam, fi, plan.visible[cam][fi])
+        if casting.run and fi in casting.frames:
+            casters = [a for a in plan.visible[cam][fi] if a in casting.actors]
+            frame = renderer.cast_shadows(cam, fi, frame, casters, manifest.effects.sun_direction,
+                                          manifest.effects.shade)
+        for actor_id, mask in frame.instance.items():
+            write_mask(out.frame("masks", cam, fi, actor=actor_id), mask)
+        if frame.shadow is not None:
+            write_mask(out.frame("shadows", cam, fi), frame.shadow)
+        write_image(out.frame("render", cam, fi, ".depth.exr"), frame.depth, dtype="float")
+        write_image(rgb_path, frame.rgb)  # written last: its presence marks the frame complete
+        done += 1
+    return done

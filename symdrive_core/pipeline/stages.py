@@ -1,11 +1,16 @@
-"""The stages ``symdrive run`` executes beyond rendering: restore, refine, harmonize, finetune,
-evaluate. Each is a thin call into the library; heavy modules are imported inside, so a plan
-that skips a stage never loads its code (no diffusion model for a scene that needs none).
+"""The stages ``symdrive run`` executes: reconstruct, render, restore, refine, harmonize, finetune,
+evaluate. Each is a thin call into the library that returns what it did and what it measured
+(:class:`StageResult`); heavy modules are imported inside, so a plan that skips a stage never
+loads its code (no diffusion model for a scene that needs none).
+
+A new stage is a function here registered with :func:`stage` and its decision in ``plan.py``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -42,19 +47,56 @@ class StageOptions:
 
 
 @dataclass
+class StageResult:
+    """What a stage did (its row in report.json's ``stages``) and what it measured (merged into
+    ``metrics``: a list extends the rows earlier stages gave under the same name, as refinement's
+    lateral rows join restoration's; anything else is set)."""
+
+    details: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+
+
+def merge_metrics(into: dict, metrics: dict) -> None:
+    for name, value in metrics.items():
+        if isinstance(value, list) and isinstance(into.get(name), list):
+            into[name] = into[name] + value
+        else:
+            into[name] = value
+
+
+STAGE_RUNNERS: dict[str, Callable[..., StageResult]] = {}
+
+
+def stage(name: str):
+    """Register a stage's runner under its plan name."""
+    def register(fn):
+        STAGE_RUNNERS[name] = fn
+        return fn
+    return register
+
+
+@dataclass
 class Shared:
     """What one stage hands to the next within a run (loaded once)."""
 
     background: object = None  # Gaussians
+    background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
     restorer: object = None
     restored: list = field(default_factory=list)  # RestoredView, for refinement
+
+
+def background_path(ctx) -> Path | None:
+    """The background splat PLY: the package's, or the one this run's reconstruct stage wrote."""
+    if ctx.shared.background_path is not None:
+        return ctx.shared.background_path
+    return ctx.manifest.resolve(ctx.manifest.background_splats)
 
 
 def background(ctx):
     from ..io.ply import read_splats
 
     if ctx.shared.background is None:
-        ctx.shared.background = read_splats(ctx.manifest.resolve(ctx.manifest.background_splats))
+        ctx.shared.background = read_splats(background_path(ctx))
     return ctx.shared.background
 
 
@@ -77,18 +119,31 @@ def _has_lateral_truth(manifest) -> bool:
     return bool((manifest.ground_truth or {}).get("lateral"))
 
 
-def reconstruct_stage(ctx) -> dict:
-    """Fit background Gaussians to the package's images (it had none)."""
+@stage("reconstruct")
+def reconstruct_stage(ctx) -> StageResult:
+    """Fit background Gaussians to the package's images (it had none); later stages read them
+    from this run's output, the manifest stays as given."""
     from ..optim.reconstruct import reconstruct
 
     out = ctx.tree.folder("reconstruction")
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
-    ctx.manifest.allow_reads_from(out)  # the run's own output, not a path the package named
-    ctx.manifest.background_splats = str((out / "background.ply").resolve())
-    return {k: v for k, v in vars(result).items() if isinstance(v, (int, float))}
+    ctx.shared.background_path = out / "background.ply"
+    return StageResult({k: v for k, v in vars(result).items() if isinstance(v, (int, float))})
 
 
-def restore_stage(ctx) -> dict:
+@stage("render")
+def render_stage(ctx) -> StageResult:
+    """Every camera's every frame (frames already on disk are kept)."""
+    from .scene_render import render_frames
+
+    jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in range(len(cam.frames))]
+    fitted = background(ctx) if ctx.shared.background_path is not None else None
+    done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted)
+    return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
+
+
+@stage("restore")
+def restore_stage(ctx) -> StageResult:
     """Restore every (frame, lateral offset) by the auto-regressive chain from the recorded view;
     with lateral ground truth, also score raw 3DGS and the ablations on those views."""
     from tqdm import tqdm
@@ -110,12 +165,13 @@ def restore_stage(ctx) -> dict:
     offsets = m.effects.lateral_offsets if opts.offsets is None else list(opts.offsets)
     done: set[tuple[str, int, float]] = set()
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
+    metrics = {}
     if ctx.plan.runs("evaluate") and _has_lateral_truth(m):
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
                                       progress=ctx.progress)
-        ctx.report.metrics["lateral"] = score_gaussians(scored, g, "raw_3dgs", opts.frames) + res.rows
+        metrics["lateral"] = score_gaussians(scored, g, "raw_3dgs", opts.frames) + res.rows
         ctx.shared.restored = list(res.views[default])
         cam_name = lateral_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
@@ -135,10 +191,11 @@ def restore_stage(ctx) -> dict:
             image = chains[cam.name, fi].restore(off, opts.ar_step)
             write_image(path, image)
         ctx.shared.restored.append(RestoredView.shifted(cam, fi, off, image))
-    return {"views_restored": len(ctx.shared.restored)}
+    return StageResult({"views_restored": len(ctx.shared.restored)}, metrics)
 
 
-def refine_stage(ctx) -> dict:
+@stage("refine")
+def refine_stage(ctx) -> StageResult:
     """Fine-tune the background on the recorded views plus the restored lateral views."""
     from ..diffusion.refine import RefineConfig, refine_gaussians
     from ..diffusion.restore import score_gaussians
@@ -148,11 +205,12 @@ def refine_stage(ctx) -> dict:
                                       RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
                                       progress=ctx.progress)
     write_splats(ctx.tree.path("refine", "background.ply"), refined)
+    metrics = {}
     if ctx.plan.runs("evaluate") and _has_lateral_truth(ctx.manifest):
-        ctx.report.metrics.setdefault("lateral", []).extend(
-            r for r in score_gaussians(ctx.manifest, refined, "refined", ctx.options.frames)
-            if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets)
-    return {"iterations": ctx.options.refine_iters, **{k: v for k, v in stats.items() if isinstance(v, (int, float))}}
+        metrics["lateral"] = [r for r in score_gaussians(ctx.manifest, refined, "refined", ctx.options.frames)
+                              if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets]
+    details = {k: v for k, v in stats.items() if isinstance(v, (int, float))}
+    return StageResult({"iterations": ctx.options.refine_iters, **details}, metrics)
 
 
 def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
@@ -185,7 +243,8 @@ def _harmonizer(ctx):
                                samples=o.harmonize_samples, seed=o.seed, max_memory_gib=o.max_memory_gib)
 
 
-def harmonize_stage(ctx) -> dict:
+@stage("harmonize")
+def harmonize_stage(ctx) -> StageResult:
     """RePaint harmonization of each rendered frame that shows an inserted vehicle."""
     from tqdm import tqdm
 
@@ -203,10 +262,11 @@ def harmonize_stage(ctx) -> dict:
         write_mask(ctx.tree.frame("harmonize", cam.name, fi, ".region.png"), region.astype(np.float32))
         write_image(path, harmonizer(image, region))
         n += 1
-    return {"frames_harmonized": n}
+    return StageResult({"frames_harmonized": n})
 
 
-def finetune_stage(ctx) -> dict:
+@stage("finetune")
+def finetune_stage(ctx) -> StageResult:
     """Colour/opacity-only fine-tune of each inserted vehicle on its harmonized frames."""
     from ..insertion.evaluate import InsertionConfig, finetune_sample, insert_frame
     from ..insertion.placements import camera_view
@@ -240,25 +300,27 @@ def finetune_stage(ctx) -> dict:
         if samples:
             write_splats(out, finetune_colors(vehicle, samples, cfg.finetune, progress=ctx.progress).gaussians)
             written.append(aid)
-    return {"actors_finetuned": len(written)}
+    return StageResult({"actors_finetuned": len(written)})
 
 
-def evaluate_stage(ctx) -> dict:
+@stage("evaluate")
+def evaluate_stage(ctx) -> StageResult:
     """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..optim.evaluate import evaluate_heldout
     from ..optim.finetune import FinetuneConfig
     from ..world.package import split_frames
 
-    m, opts, details = ctx.manifest, ctx.options, {}
-    if m.background_splats and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
-        ctx.report.metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
-    if (m.ground_truth or {}).get("insertion") and m.background_splats:
+    m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
+    has_background = background_path(ctx) is not None
+    if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
+        metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
+    if (m.ground_truth or {}).get("insertion") and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = InsertionConfig(train_views=opts.insertion_train_views,
                               finetune=FinetuneConfig(steps=opts.finetune_steps, seed=opts.seed),
                               assets_out=ctx.tree.folder("insertion_assets"))
-        ctx.report.metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
-                                                             details=details, progress=ctx.progress)
-        ctx.report.extra.setdefault("timings", {}).update(details.get("timings", {}))
-    return {"metrics": sorted(ctx.report.metrics)}
+        metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
+                                                  details=details, progress=ctx.progress)
+    return StageResult({"metrics": sorted(metrics), **({"timings": details["timings"]} if "timings" in details else {})},
+                       metrics)

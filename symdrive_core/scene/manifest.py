@@ -21,7 +21,7 @@ from ..errors import InputError
 from ..io import open_regular
 from ..io.atomic import write_text_atomic
 from ..io.images import MAX_IMAGE_SIDE
-from .paths import check_name, check_path_text, check_relative, is_inside, real, resolve_inside
+from .paths import check_name, check_path_text, check_relative, is_inside, resolve_inside
 from .poses import Pose
 
 FORMAT = "symdrive-scene"
@@ -138,26 +138,16 @@ class Manifest:
     path: Path | None = None
     # Whether asset paths may lead outside the package (``--allow-external-assets``).
     allow_external: bool = field(default=False, compare=False)
-    # Folders besides the package the program itself trusts for reads (``allow_reads_from``).
-    read_roots: list[Path] = field(default_factory=list, compare=False, repr=False)
 
     def resolve(self, rel: str | None, where: str | None = None) -> Path | None:
         """``rel`` (a path from the manifest) as a path to read, refused with :class:`InputError`
         naming the field unless it lies inside the package once symlinks are resolved (absolute
-        paths and ``..`` that climb out included), or ``allow_external`` was given at load, or
-        it lies in a folder passed to :meth:`allow_reads_from`. FIFOs, devices and sockets are
-        refused in every case."""
+        paths and ``..`` that climb out included), or ``allow_external`` was given at load. FIFOs,
+        devices and sockets are refused in every case."""
         if rel is None:
             return None
         return resolve_inside(self.root, rel, where or (lambda: self.field_of(rel)), self.path or self.root,
-                              allow_external=self.allow_external, also=self.read_roots)
-
-    def allow_reads_from(self, folder: str | os.PathLike) -> None:
-        """Let :meth:`resolve` accept files under ``folder`` (a folder the program wrote, such as
-        the run's output, not one the package names)."""
-        folder = real(folder)
-        if folder not in self.read_roots:
-            self.read_roots.append(folder)
+                              allow_external=self.allow_external)
 
     def asset_refs(self) -> list[tuple[str, str]]:
         """(field path, path as written) of every file the manifest names outside ``ground_truth``."""

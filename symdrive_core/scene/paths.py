@@ -14,7 +14,7 @@ import os
 import re
 import stat
 from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import Callable, Iterable
+from typing import Callable
 
 from ..errors import InputError
 
@@ -115,10 +115,9 @@ def is_inside(candidate, root) -> bool:
     return real(candidate).is_relative_to(real(root))
 
 
-def resolve_inside(root, rel: str, where: str | Callable[[], str], path=None, *, allow_external: bool = False,
-                   also: Iterable = ()) -> Path:
-    """``root / rel``, refused unless it lies inside ``root`` or one of the folders ``also`` once
-    symlinks are resolved (``allow_external`` lifts that). Anything that exists but is neither a
+def resolve_inside(root, rel: str, where: str | Callable[[], str], path=None, *,
+                   allow_external: bool = False) -> Path:
+    """``root / rel``, refused unless it lies inside ``root`` once symlinks are resolved (``allow_external`` lifts that). Anything that exists but is neither a
     regular file nor a folder (a FIFO, a device, a socket) is refused in every case: reading one
     can block forever or never end. ``where`` (the field, for messages) may be a function,
     called only when there is something to report."""
@@ -129,7 +128,7 @@ def resolve_inside(root, rel: str, where: str | Callable[[], str], path=None, *,
         check_path_text(rel, field(), path)
     full = Path(root) / rel
     if not allow_external:
-        if not any(is_inside(full, r) for r in (root, *also)):
+        if not is_inside(full, root):
             kind = ("an absolute path outside the package" if is_absolute_text(rel)
                     else "outside the package" if escapes(rel) else "a link that leads outside the package")
             _fail(path, field(), f"{rel!r} is {kind}; {EXTERNAL_HINT}")

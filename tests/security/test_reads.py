@@ -175,19 +175,6 @@ def test_declared_size_larger_than_the_file_is_an_error_not_an_allocation(tmp_pa
         read_header(ascii_path)
 
 
-def test_a_folder_the_program_wrote_can_be_allowed_for_reads(make_package, tmp_path):
-    manifest = make_package()
-    ply = _outside_ply(tmp_path)
-    m = load_manifest(manifest)
-    m.background_splats = str(ply)  # what a run sets after reconstructing into an --out elsewhere
-    with pytest.raises(InputError, match="background.splats"):
-        m.resolve(m.background_splats)
-    m.allow_reads_from(ply.parent)
-    assert m.resolve(m.background_splats) == ply
-    with pytest.raises(InputError, match="outside the package"):
-        m.resolve("../../../../etc/passwd")
-
-
 def test_output_folder_linked_out_of_the_package_is_refused(make_package, tmp_path):
     manifest = make_package()
     m = load_manifest(manifest)
