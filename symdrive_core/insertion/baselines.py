@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..conventions import linear_to_srgb, srgb_to_linear
+from ..splat.constants import ALPHA_THRESHOLD
 from .shadow import dilate
 
 _RGB_TO_LMS = np.array([[0.3811, 0.5783, 0.0402], [0.1967, 0.7244, 0.0782], [0.0241, 0.1288, 0.8444]])
@@ -47,7 +48,7 @@ def reinhard_transfer(image: np.ndarray, vehicle_alpha: np.ndarray, *, ring: int
     img = np.asarray(image, dtype=np.float64)
     alpha = np.clip(np.asarray(vehicle_alpha, dtype=np.float64), 0.0, 1.0)
     car = alpha > threshold
-    bg = background_ring(car, ring) & (alpha < 1.0 / 255.0)
+    bg = background_ring(car, ring) & (alpha < ALPHA_THRESHOLD)
     if car.sum() < 2 or bg.sum() < 2:
         return img.astype(np.float32)
     lab = rgb_to_lab(img)

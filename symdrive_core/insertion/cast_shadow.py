@@ -24,14 +24,13 @@ from .. import conventions
 from ..conventions import linear_to_srgb, srgb_to_linear
 from ..gaussians import Gaussians
 from ..scene import Pose
-from ..splat.kernels import ALPHA_MAX
+from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
 from ..splat.projection import quat_to_rotmat
 from ..splat.rasterize import RasterizePixels, bin_gaussians
 from .composite import InsertionView
 from .place import place
 from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z
 
-ALPHA_THRESHOLD = 1.0 / 255.0
 MAP_MAX_PIXELS = 1024  # longest side of the shadow map
 MAP_MIN_CELL_M = 0.01
 MAP_BLUR_CELLS2 = 0.3  # added to each projected covariance (cells^2): a flat splat edge-on to the sun stays finite

@@ -20,13 +20,12 @@ import torch
 from .. import conventions
 from ..gaussians import Gaussians
 from ..scene import Pose
+from ..splat.constants import ALPHA_THRESHOLD
 from ..splat.projection import project_gaussians
 from ..splat.rasterize import RasterizePixels, bin_gaussians
 from ..splat.sh import sh_to_color
 from ..splat.tensors import GaussianTensors
 from .place import place
-
-ALPHA_THRESHOLD = 1.0 / 255.0
 
 
 @dataclass(frozen=True)

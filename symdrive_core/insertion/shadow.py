@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import conventions
 from ..scene import Pose
+from ..splat.constants import ALPHA_THRESHOLD
 
 MIN_SUN_ELEVATION_SIN = 1e-3
 
@@ -120,7 +121,7 @@ def shadow_region(pose: Pose, wlh, sun_direction, c2w: np.ndarray, K: np.ndarray
     return dilate(hit & inside_convex(xy, hull), dilate_px)
 
 
-def harmonization_region(vehicle_alpha: np.ndarray, shadow: np.ndarray | None, *, threshold: float = 1.0 / 255.0,
+def harmonization_region(vehicle_alpha: np.ndarray, shadow: np.ndarray | None, *, threshold: float = ALPHA_THRESHOLD,
                          dilate_px: int = 2) -> np.ndarray:
     """The pixels harmonization may change: the vehicle (dilated for its rim) ∪ its shadow region."""
     region = dilate(np.asarray(vehicle_alpha) > threshold, dilate_px)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
 from .stages import StageOptions
 
@@ -93,8 +94,8 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
         Setting("extent", "3 sigma", False, measure(extent="3sigma")),
         Setting("extent", "2 sigma", False, measure(extent=2.0)),
         *[Setting("SH degree", str(d), d == full, measure(degree=d)) for d in range(full + 1)],
-        *[Setting("alpha threshold", f"1/{round(1 / a)}", a == 1 / 255, measure(alpha_threshold=a))
-          for a in (1 / 1000, 1 / 255, 1 / 64)],
+        *[Setting("alpha threshold", f"1/{round(1 / a)}", a == ALPHA_THRESHOLD,
+                  measure(alpha_threshold=a)) for a in (1 / 1000, ALPHA_THRESHOLD, 1 / 64)],
         Setting("precision", "float32", True, measure()),
         Setting("precision", "float64", False, measure(dtype=torch.float64)),
         *[Setting("resolution", f"{s:g}x, upsampled", s == 1.0, measure(scale=s)) for s in (0.5, 0.75, 1.0)],

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from ..scene.visibility import box_corners_world, box_in_frustum
+from .constants import ALPHA_THRESHOLD
 from .projection import camera_center
 from .rasterize import rasterize
 from .sh import sh_to_color
@@ -63,7 +64,7 @@ def quat_multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
                   background=None, near: float = 0.01, far: float = 1e10, eps2d: float = 0.3,
-                  antialiased: bool = False, alpha_threshold: float = 1.0 / 255.0, extent="opacity",
+                  antialiased: bool = False, alpha_threshold: float = ALPHA_THRESHOLD, extent="opacity",
                   backend: str = "auto", cull: bool = True) -> dict:
     """Render layers together. Returns dict(rgb [H,W,3], alpha [H,W,1], depth [H,W,1],
     instance [H,W,n_actors], actor_ids [ids of the instance channels, in first-seen order, background

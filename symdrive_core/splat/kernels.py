@@ -22,10 +22,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..conventions import PIXEL_CENTER_OFFSET
-
-ALPHA_MAX = 0.99
-T_STOP = 1e-4
-TILE = 16
+from .constants import ALPHA_MAX, T_STOP
 
 
 @njit(cache=True, inline="always")

@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from .constants import ALPHA_MAX, ALPHA_THRESHOLD, EXTENT_CAP, T_STOP
+
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
 C2 = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396]
@@ -50,7 +52,7 @@ def _rotmat(q):
 
 def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, height, *, background=None,
                   sh_degree=None, near=0.01, far=1e10, eps2d=0.3, antialiased=False, render_depth=False,
-                  alpha_threshold=1.0 / 255.0, extent="opacity", tile_cull=True, tile_size=16):
+                  alpha_threshold=ALPHA_THRESHOLD, extent="opacity", tile_cull=True, tile_size=16):
     """Returns dict(rgb [H,W,C], alpha [H,W,1], depth [H,W,1] or None, radii [N,2]) in float64."""
     f = lambda a: np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)
     means, quats, scales, opac, colors = f(means), f(quats), f(scales), f(opacities), f(colors)
@@ -92,7 +94,7 @@ def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, he
         if o < alpha_threshold:
             continue
         if extent == "opacity":
-            cap = 3.33 if alpha_threshold >= 1 / 255 else math.sqrt(2 * math.log(1 / alpha_threshold))
+            cap = EXTENT_CAP if alpha_threshold >= ALPHA_THRESHOLD else math.sqrt(2 * math.log(1 / alpha_threshold))
             k = min(cap, math.sqrt(2 * math.log(max(o / alpha_threshold, 1.0))))
         elif extent == "3sigma":
             k = 3.0
@@ -115,7 +117,7 @@ def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, he
     for z, i, u, v, conic, o, rx, ry in recs:
         dx, dy = u - us, v - vs
         sigma = 0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) + conic[1] * dx * dy
-        alpha = np.minimum(0.99, o * np.exp(-np.maximum(sigma, 0.0)))
+        alpha = np.minimum(ALPHA_MAX, o * np.exp(-np.maximum(sigma, 0.0)))
         use = (sigma >= 0) & (alpha >= alpha_threshold) & ~done
         if tile_cull:
             ntx, nty = math.ceil(width / tile_size), math.ceil(height / tile_size)
@@ -125,7 +127,7 @@ def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, he
             y1 = min(max(0, math.ceil((v + ry) / tile_size)), nty)
             use &= (tile_x >= x0) & (tile_x < x1) & (tile_y >= y0) & (tile_y < y1)
         nextT = T * (1 - alpha)
-        stop = use & (nextT <= 1e-4)
+        stop = use & (nextT <= T_STOP)
         done |= stop
         use &= ~stop
         w = np.where(use, alpha * T, 0.0)

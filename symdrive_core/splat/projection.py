@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-EXTENT_CAP = 3.33
+from .constants import ALPHA_THRESHOLD, EXTENT_CAP
+
 AA_COMPENSATION_FLOOR = 0.005 ** 2
 RADIUS_MAX = float(2 ** 30)  # radii are clamped before converting to integers
 
@@ -82,7 +83,7 @@ def extent_factor(extent, opac: torch.Tensor, alpha_threshold: float) -> torch.T
     if extent == "3sigma":
         return torch.full_like(opac, 3.0)
     if extent == "opacity":
-        cap = EXTENT_CAP if alpha_threshold >= 1.0 / 255.0 else math.sqrt(2.0 * math.log(1.0 / alpha_threshold))
+        cap = EXTENT_CAP if alpha_threshold >= ALPHA_THRESHOLD else math.sqrt(2.0 * math.log(1.0 / alpha_threshold))
         ratio = torch.clamp_min(opac / alpha_threshold, 1.0)
         return torch.clamp_max(torch.sqrt(2.0 * torch.log(ratio)), cap)
     raise ValueError(f"extent must be 'opacity', '3sigma' or a number, got {extent!r}")
@@ -90,7 +91,7 @@ def extent_factor(extent, opac: torch.Tensor, alpha_threshold: float) -> torch.T
 
 def project_gaussians_torch(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
                             near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
-                            extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                            extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                             finite_mask: torch.Tensor | None = None) -> Projection:
     """The vectorised torch projection (reference; gradients by autograd)."""
     n = means.shape[0]
@@ -173,7 +174,7 @@ def _extent_params(extent, alpha_threshold: float) -> tuple[int, float, float]:
     if extent == "3sigma":
         return pk.EXTENT_NUMBER, 3.0, 0.0
     if extent == "opacity":
-        cap = EXTENT_CAP if alpha_threshold >= 1.0 / 255.0 else math.sqrt(2.0 * math.log(1.0 / alpha_threshold))
+        cap = EXTENT_CAP if alpha_threshold >= ALPHA_THRESHOLD else math.sqrt(2.0 * math.log(1.0 / alpha_threshold))
         return pk.EXTENT_OPACITY, 0.0, cap
     raise ValueError(f"extent must be 'opacity', '3sigma' or a number, got {extent!r}")
 
@@ -244,7 +245,7 @@ class ProjectGaussians(torch.autograd.Function):
 
 def project_gaussians_numba(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
                             near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
-                            extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                            extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                             finite_mask: torch.Tensor | None = None) -> Projection:
     """The numba projection (CPU tensors): same outputs as :func:`project_gaussians_torch`."""
     n = means.shape[0]
@@ -274,7 +275,7 @@ def use_numba(*tensors) -> bool:
 
 def project_gaussians(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
                       near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
-                      extent="opacity", alpha_threshold: float = 1.0 / 255.0,
+                      extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                       finite_mask: torch.Tensor | None = None, backend: str = "auto") -> Projection:
     """Project Gaussians (see the module docstring). ``backend``: ``"numba"``, ``"torch"`` or
     ``"auto"`` (numba for CPU float tensors, else torch). Differentiable either way."""

@@ -21,11 +21,10 @@ import numpy as np
 import torch
 
 from . import kernels
+from .constants import ALPHA_THRESHOLD, TILE_SIZE
 from .numba_scope import KernelScope as _KernelScope
 from .projection import camera_center, project_gaussians, use_numba
 from .sh import sh_to_color
-
-TILE_SIZE = kernels.TILE
 
 
 @dataclass
@@ -197,7 +196,7 @@ LOW_PRECISION = (torch.float16, torch.bfloat16)
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int, *,
               background=None, sh_degree: int | None = None, near: float = 0.01, far: float = 1e10,
               eps2d: float = 0.3, antialiased: bool = False, render_depth: bool = False,
-              alpha_threshold: float = 1.0 / 255.0, extent="opacity", backend: str = "auto",
+              alpha_threshold: float = ALPHA_THRESHOLD, extent="opacity", backend: str = "auto",
               groups: torch.Tensor | None = None, n_groups: int = 0):
     """Render activated Gaussians. Returns ``(rgb [H,W,C], alpha [H,W,1], info)``.
 

@@ -12,10 +12,10 @@ import torch
 from torch.utils.checkpoint import checkpoint
 
 from ..conventions import PIXEL_CENTER_OFFSET
-from .kernels import ALPHA_MAX, T_STOP, TILE
+from .constants import ALPHA_MAX, T_STOP, TILE_SIZE
 
 
-def tile_lists_torch(means2d, radii, depths, width: int, height: int, tile_size: int = TILE):
+def tile_lists_torch(means2d, radii, depths, width: int, height: int, tile_size: int = TILE_SIZE):
     """(offsets [n_tiles+1], ids [n_isect]) with each tile's ids sorted by depth (stable)."""
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
@@ -75,7 +75,7 @@ def _composite_chunk(means2d, conics, opac, feats, onehot, g, mask, px, py, thre
 
 
 def rasterize_pixels_torch(means2d, conics, opac, feats, groups, n_groups: int, width: int, height: int,
-                           threshold: float, radii, depths, tile_size: int = TILE, chunk_elems: int = 1 << 22):
+                           threshold: float, radii, depths, tile_size: int = TILE_SIZE, chunk_elems: int = 1 << 22):
     """Like the numba path: (features [H,W,C], alpha [H,W], instance [H,W,G], n_isect)."""
     dev = means2d.device
     dtype = feats.dtype
