@@ -108,7 +108,7 @@ class SYMDRIVE_PT_export(_Sidebar, bpy.types.Panel):
 def menu_import(self, context):
     self.layout.operator("symdrive.import_splats", text="3DGS Splats (.ply)")
     self.layout.operator("symdrive.import_vehicle", text="SymDrive Vehicle (.obj/.ply/.glb)")
-    self.layout.operator("symdrive.import_drive", text="Recorded Drive (nerfstudio / 3DGS .json)")
+    self.layout.operator("symdrive.import_drive", text="Recorded Drive (COLMAP / nerfstudio / 3DGS)")
 
 
 def menu_export(self, context):

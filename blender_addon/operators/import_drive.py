@@ -1,12 +1,12 @@
 """Import Recorded Drive: the cameras of a reconstructed drive as animated Blender cameras, each
 recorded frame shown as the camera's background image on its frame.
 
-Reads nerfstudio ``transforms.json`` and the 3DGS trainer's ``cameras.json`` with the core's own
-readers (``importers.nerfstudio.read_views``, ``importers.gs_trainer.read_views``: numpy only),
-groups the views into cameras and frames as ``symdrive import`` does, and builds the cameras with
-*Import Camera Rig*'s code. Poses stay in the reconstruction's frame (no ground fit, no metric
-scale: ``symdrive import`` does that). COLMAP models need pycolmap, which Blender lacks: run
-``symdrive import colmap`` and then *Import Camera Rig* on the package it writes.
+Reads nerfstudio ``transforms.json``, the 3DGS trainer's ``cameras.json`` and COLMAP models with
+the core's own readers (``importers.nerfstudio``, ``importers.gs_trainer``: numpy only;
+``importers.colmap``: pycolmap, imported only when a COLMAP model is chosen, so the add-on loads
+without it), groups the views into cameras and frames as ``symdrive import`` does, and builds the
+cameras with *Import Camera Rig*'s code. Poses stay in the reconstruction's frame (no ground fit,
+no metric scale: ``symdrive import`` does that).
 """
 
 from __future__ import annotations
@@ -31,9 +31,32 @@ def _importer(name: str):
     return importlib.import_module(f"{CORE}.importers.{name}")
 
 
+COLMAP_FILES = ("cameras", "images", "points3D", "rigs", "frames")  # the .bin/.txt files of a model
+
+
+def colmap_model(path: Path) -> Path | None:
+    """The COLMAP model folder ``path`` is, or holds ``path`` (cameras.bin, images.txt, ...); else None."""
+    if path.is_file() and not (path.stem in COLMAP_FILES and path.suffix in (".bin", ".txt")):
+        return None
+    folder = path if path.is_dir() else path.parent
+    return folder if _importer("colmap").model_file(folder, "cameras").is_file() else None
+
+
+def colmap_images(model: Path) -> Path:
+    """Where a COLMAP project keeps its images: ``images/`` in, beside or two above the model
+    (``sparse/0`` of ``colmap mapper``, ``sparse`` of ``colmap image_undistorter``)."""
+    candidates = [model / "images", model.parent / "images", model.parent.parent / "images"]
+    return next((c for c in candidates if c.is_dir()), candidates[1])
+
+
 def read_drive(path: str | Path, images: str | Path | None = None, fps: float = 10.0):
-    """(format, Grouped views) of a nerfstudio transforms.json or a 3DGS trainer's cameras.json."""
+    """(format, Grouped views) of a nerfstudio transforms.json, a 3DGS trainer's cameras.json or a
+    COLMAP model folder."""
     path = Path(path)
+    model = colmap_model(path)
+    if model is not None:
+        src = _importer("colmap").read_colmap(model, images or colmap_images(model), fps=fps)
+        return "colmap", src.grouped
     if path.is_dir():
         path = path / ("transforms.json" if (path / "transforms.json").is_file() else "cameras.json")
     try:
@@ -56,8 +79,8 @@ def read_drive(path: str | Path, images: str | Path | None = None, fps: float = 
         raise errors.InputError(
             path,
             "neither a nerfstudio transforms.json (an object with 'frames') nor a "
-            "3DGS trainer's cameras.json (a list); for COLMAP run 'symdrive import colmap' "
-            "and use Import Camera Rig on its package",
+            "3DGS trainer's cameras.json (a list); for COLMAP choose the model folder "
+            "(cameras.bin or cameras.txt)",
         )
     return fmt, frames.group_views(views, fps=fps)
 
@@ -110,22 +133,21 @@ def set_background_frames(camera: bpy.types.Object, images: list[str | None], fr
 
 
 class SYMDRIVE_OT_import_drive(bpy.types.Operator, ImportHelper):
-    """Import a recorded drive (nerfstudio transforms.json or 3DGS cameras.json) as animated cameras
-    with each recorded frame as the camera's background. COLMAP: run 'symdrive import colmap' first,
-    then Import Camera Rig on the package it writes"""
+    """Import a recorded drive (nerfstudio transforms.json, 3DGS cameras.json or a COLMAP model folder)
+    as animated cameras with each recorded frame as the camera's background"""
 
     bl_idname = "symdrive.import_drive"
     bl_label = "Import Recorded Drive"
     bl_options = {"REGISTER", "UNDO"}
 
     filename_ext = ".json"
-    filter_glob: StringProperty(default="*.json", options={"HIDDEN"})
+    filter_glob: StringProperty(default="*.json;*.bin;*.txt", options={"HIDDEN"})
     images_dir: StringProperty(
         name="Images folder",
         default="",
         subtype="DIR_PATH",
-        description="3DGS only: where the recorded images are (default: cfg_args' source, else images/ beside "
-        "cameras.json)",
+        description="3DGS and COLMAP: where the recorded images are (default 3DGS: cfg_args' source, else "
+        "images/ beside cameras.json; COLMAP: images/ in, beside or two folders above the model)",
     )
     fps: FloatProperty(
         name="Frame rate",

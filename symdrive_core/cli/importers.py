@@ -31,9 +31,12 @@ def _common(p, images: bool) -> None:
 def add_commands(sub) -> None:
     imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package")
     isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
-    p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary), PINHOLE/SIMPLE_PINHOLE cameras")
+    p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary); distorted cameras with --undistort")
     p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
     _common(p, images=True)
+    p.add_argument("--undistort", action="store_true",
+                   help="undistort cameras with lens distortion (SIMPLE_RADIAL, OPENCV, ...) with COLMAP's "
+                        "undistorter: PINHOLE cameras, resampled images copied into the package")
     p.set_defaults(func=_colmap)
     p = isub.add_parser("nerfstudio", help="nerfstudio transforms.json (OpenGL camera axes)")
     p.add_argument("transforms", metavar="TRANSFORMS_JSON", help="nerfstudio transforms.json")
@@ -46,7 +49,7 @@ def add_commands(sub) -> None:
     p.set_defaults(func=_gs)
 
 
-def _options(args):
+def _options(args, copy_images: bool = False):
     from pathlib import Path
 
     from ..errors import InputError
@@ -61,13 +64,13 @@ def _options(args):
     if not args.fps > 0:
         raise InputError("--fps", f"expected a positive frame rate, got {args.fps}")
     return Options(out=Path(args.out), camera_height=args.camera_height, scale=args.scale, up=parse_up(args.up),
-                   heldout_every=args.heldout_every, copy_images=args.copy_images, force=args.force, name=args.name)
+                   heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 
 
-def _finish(src, args, t0) -> int:
+def _finish(src, args, t0, copy_images: bool = False) -> int:
     from ..importers.package import write_package
 
-    info = write_package(src, _options(args))
+    info = write_package(src, _options(args, copy_images))
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")
@@ -78,12 +81,26 @@ def _finish(src, args, t0) -> int:
 
 
 def _colmap(args) -> int:
+    import contextlib
+    from pathlib import Path
+
     from ..importers.colmap import read_colmap
+    from ..importers.undistort import undistorted
 
     t0 = time.perf_counter()
     _options(args)
-    src = read_colmap(args.model, args.images, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
-    return _finish(src, args, t0)
+    with undistorted(args.model, args.images, args.out) if args.undistort else contextlib.nullcontext() as und:
+        model, images = (args.model, args.images) if und is None else (und.model, und.images)
+        src = read_colmap(model, images, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
+        if und is not None:
+            src.path = Path(args.model)
+            src.notes["undistorted_cameras"] = und.cameras
+            models = ", ".join(f"camera {cid} ({c['model']})" for cid, c in und.cameras.items())
+            print(f"undistorted {sum(len(row) for row in src.grouped.table)} images of {models} to PINHOLE with "
+                  f"COLMAP's undistorter ({time.perf_counter() - t0:.1f} s)")
+        elif args.undistort:
+            print("note: no camera has lens distortion; imported without undistorting")
+        return _finish(src, args, t0, copy_images=und is not None)
 
 
 def _nerfstudio(args) -> int:

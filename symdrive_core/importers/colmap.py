@@ -2,13 +2,14 @@
 
 COLMAP stores world-to-camera poses with OpenCV camera axes and puts pixel centres at +0.5, the
 package's conventions, so poses invert and ``PINHOLE``/``SIMPLE_PINHOLE`` parameters map straight
-to ``K``. Models with lens distortion are refused naming the model (undistort first with
-``colmap image_undistorter``, which writes a PINHOLE model and undistorted images), unless every
-distortion coefficient is zero.
+to ``K``. Models with lens distortion are refused naming the model, unless every distortion
+coefficient is zero; :mod:`.undistort` turns them into PINHOLE models (``--undistort``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,15 +22,21 @@ from .package import Source
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 
 
-def _pycolmap():
+def load_pycolmap():
+    """pycolmap, or one line saying how to install it into this very Python (Blender's too)."""
+    # pycolmap's wheel links its own zlib and libpng with visible symbols; loaded before
+    # OpenImageIO it takes over OpenImageIO's PNG writer, which then crashes (double free).
+    with contextlib.suppress(ImportError):
+        import OpenImageIO  # noqa: F401
     try:
         import pycolmap
-    except ImportError:  # pragma: no cover - depends on the install
-        raise InputError("pycolmap", "not installed: pip install 'symdrive[import]' (or pip install pycolmap)") from None
+    except ImportError:
+        raise InputError("pycolmap", f'not installed; COLMAP models are read through it: "{sys.executable}" -m pip '
+                         "install pycolmap") from None
     return pycolmap
 
 
-def _model_file(model_dir: Path, stem: str) -> Path:
+def model_file(model_dir: Path, stem: str) -> Path:
     for ext in (".bin", ".txt"):
         if (model_dir / f"{stem}{ext}").is_file():
             return model_dir / f"{stem}{ext}"
@@ -41,10 +48,10 @@ def read_model(model_dir: str | Path):
     if not model_dir.is_dir():
         raise InputError(model_dir, "not a folder (expected a COLMAP model: cameras, images, points3D)", "MODEL_DIR")
     for stem in ("cameras", "images"):
-        f = _model_file(model_dir, stem)
+        f = model_file(model_dir, stem)
         if not f.is_file():
             raise InputError(f, f"missing: a COLMAP model needs {stem}.bin or {stem}.txt", stem)
-    pycolmap = _pycolmap()
+    pycolmap = load_pycolmap()
     try:
         return pycolmap.Reconstruction(str(model_dir))
     except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError on a malformed model
@@ -52,8 +59,13 @@ def read_model(model_dir: str | Path):
         raise InputError(model_dir, f"cannot read the COLMAP model: {msg}", "model") from None
 
 
-def camera_K(cam, where: str, source: Path) -> np.ndarray:
-    name = cam.model_name if hasattr(cam, "model_name") else str(cam.model).split(".")[-1]
+def model_name(cam) -> str:
+    return cam.model_name if hasattr(cam, "model_name") else str(cam.model).split(".")[-1]
+
+
+def pinhole_K(cam) -> np.ndarray | None:
+    """``K`` of a camera without lens distortion, None for one with distortion."""
+    name = model_name(cam)
     p = np.asarray(cam.params, dtype=np.float64)
     if name == "PINHOLE":
         return conventions.intrinsics(p[0], p[1], p[2], p[3])
@@ -64,15 +76,23 @@ def camera_K(cam, where: str, source: Path) -> np.ndarray:
         return conventions.intrinsics(p[0], p[1], p[2], p[3])
     if name in ("SIMPLE_RADIAL", "RADIAL") and not np.any(p[3:]):
         return conventions.intrinsics(p[0], p[0], p[1], p[2])
-    raise InputError(source, f"camera model {name} has lens distortion; only PINHOLE and SIMPLE_PINHOLE are imported "
-                     "(undistort first: colmap image_undistorter writes a PINHOLE model)", where)
+    return None
+
+
+def camera_K(cam, where: str, source: Path) -> np.ndarray:
+    K = pinhole_K(cam)
+    if K is None:
+        raise InputError(source, f"camera model {model_name(cam)} has lens distortion; import it with "
+                         "'symdrive import colmap ... --undistort' (COLMAP's undistorter writes PINHOLE cameras "
+                         "and undistorted images into the package)", where)
+    return K
 
 
 def read_colmap(model_dir: str | Path, images: str | Path | None, *, splats: str | Path | None = None,
                 camera_name: str = "front", fps: float = 10.0) -> Source:
     model_dir = Path(model_dir)
     rec = read_model(model_dir)
-    cam_file, img_file = _model_file(model_dir, "cameras"), _model_file(model_dir, "images")
+    cam_file, img_file = model_file(model_dir, "cameras"), model_file(model_dir, "images")
     images = Path(images) if images is not None else None
     Ks = {}
     for cid, cam in rec.cameras.items():

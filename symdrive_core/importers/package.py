@@ -61,19 +61,22 @@ def parse_up(text: str | None):
     return tuple(v)
 
 
-def _check_images(g: Grouped) -> None:
+def check_image(image: Path, width: int, height: int, source: Path, where: str) -> None:
+    """A recorded image exists and has its camera's size (``source``/``where`` name the record)."""
     from ..io.images import image_size
 
-    for cam, row in zip(g.cameras, g.table):
+    if not image.is_file():
+        raise InputError(image, f"image not found (named by {source.name})", where)
+    w, h, _ = image_size(image, where)
+    if (w, h) != (width, height):
+        raise InputError(image, f"image is {w}x{h}, the camera ({source}: {where}) is {width}x{height}", where)
+
+
+def _check_images(g: Grouped) -> None:
+    for row in g.table:
         for v in row:
-            if v.image is None:
-                continue
-            if not v.image.is_file():
-                raise InputError(v.image, f"image not found (named by {v.source.name})", v.where)
-            w, h, _ = image_size(v.image, v.where)
-            if (w, h) != (v.width, v.height):
-                raise InputError(v.image, f"image is {w}x{h}, the camera ({v.source}: {v.where}) is "
-                                 f"{v.width}x{v.height}", v.where)
+            if v.image is not None:
+                check_image(v.image, v.width, v.height, v.source, v.where)
 
 
 def write_package(src: Source, opt: Options) -> dict:

@@ -1,8 +1,9 @@
-"""Import Recorded Drive: nerfstudio transforms.json and 3DGS cameras.json become animated cameras
-with the recorded frames as their backgrounds."""
+"""Import Recorded Drive: nerfstudio transforms.json, 3DGS cameras.json and COLMAP models become
+animated cameras with the recorded frames as their backgrounds."""
 
 import json
 import struct
+import sys
 import zlib
 
 import numpy as np
@@ -54,6 +55,21 @@ def _gs(tmp_path):
     return tmp_path / "cameras.json"
 
 
+COLMAP_K = conventions.intrinsics(32.0, 33.0, 21.0, 15.5)
+
+
+def colmap_drive(tmp_path):
+    """A binary COLMAP model in sparse/0 with its images in images/, as ``colmap mapper`` leaves them."""
+    from tests.importers.demo_formats import World, write_colmap
+
+    names = [f"{i:04d}.png" for i in range(N)]
+    for i, name in enumerate(names):
+        _png(tmp_path / "images" / name, 40 * i)
+    world = World(S=np.eye(4), names=names, images=[], K=COLMAP_K, width=W, height=H, c2w=np.stack(_poses()),
+                  c2w_demo=np.stack(_poses()), splats=None, points=np.zeros((0, 3)), colors=np.zeros((0, 3)))
+    return write_colmap(world, tmp_path / "sparse" / "0", with_points=False)
+
+
 def _check(bpy, K):
     scene = bpy.context.scene
     cams = [o for o in bpy.data.objects if o.type == "CAMERA"]
@@ -93,8 +109,39 @@ def test_3dgs_cameras_json_becomes_animated_cameras_with_backgrounds(blender, tm
     assert [f.replace("\\", "/").rsplit("/", 1)[-1] for f in files] == [f"{i:04d}.png" for i in range(N)]
 
 
+@pytest.mark.parametrize("pick", ["folder", "images.bin"])
+def test_colmap_model_becomes_animated_cameras_with_the_core_importers_poses(blender, tmp_path, pick):
+    pytest.importorskip("pycolmap")
+    from symdrive_core.importers.colmap import read_colmap
+
+    model = colmap_drive(tmp_path)
+    path = model if pick == "folder" else model / pick
+    assert blender.ops.symdrive.import_drive(filepath=str(path)) == {"FINISHED"}
+    files = _check(blender, COLMAP_K)
+    assert [f.replace("\\", "/").rsplit("/", 1)[-1] for f in files] == [f"{i:04d}.png" for i in range(N)]
+    cam = blender.data.objects["front"]
+    scene = blender.context.scene
+    for i, view in enumerate(read_colmap(model, tmp_path / "images").grouped.table[0]):
+        scene.frame_set(scene.frame_start + i)
+        got = conventions.blender_camera_to_opencv(np.array(cam.matrix_world))
+        np.testing.assert_allclose(got, view.c2w, atol=1e-5)
+
+
+def test_colmap_without_pycolmap_is_one_line_saying_how_to_install_it(blender, tmp_path, monkeypatch):
+    pytest.importorskip("pycolmap")  # to write the model
+    model = colmap_drive(tmp_path)
+    monkeypatch.setitem(sys.modules, "pycolmap", None)  # `import pycolmap` now raises ImportError
+    with pytest.raises(RuntimeError) as raised:
+        blender.ops.symdrive.import_drive(filepath=str(model))
+    message = str(raised.value).strip()
+    assert len(message.splitlines()) == 1 and "Traceback" not in message, message
+    assert f'"{sys.executable}" -m pip install pycolmap' in message
+    assert not [o for o in blender.data.objects if o.type == "CAMERA"]
+    assert not blender.data.images
+
+
 def test_a_json_of_another_kind_is_refused(blender, tmp_path):
     (tmp_path / "x.json").write_text('{"hello": 1}')
-    with pytest.raises(RuntimeError, match="symdrive import colmap"):
+    with pytest.raises(RuntimeError, match="COLMAP choose the model folder"):
         blender.ops.symdrive.import_drive(filepath=str(tmp_path / "x.json"))
     assert not [o for o in blender.data.objects if o.type == "CAMERA"]

@@ -98,12 +98,15 @@ def link_images(world: World, folder: Path, names: list[str] | None = None) -> P
 
 
 def write_colmap(world: World, model: Path, *, binary: bool = True, model_name: str = "PINHOLE",
-                 with_points: bool = True) -> Path:
-    import pycolmap
+                 with_points: bool = True, params: list[float] | None = None) -> Path:
+    """``params`` default to the world's K as PINHOLE or SIMPLE_PINHOLE parameters."""
+    from symdrive_core.importers.colmap import load_pycolmap
 
+    pycolmap = load_pycolmap()
     rec = pycolmap.Reconstruction()
     fx, fy, cx, cy = world.K[0, 0], world.K[1, 1], world.K[0, 2], world.K[1, 2]
-    params = [fx, fy, cx, cy] if model_name == "PINHOLE" else [fx, cx, cy]
+    if params is None:
+        params = [fx, fy, cx, cy] if model_name == "PINHOLE" else [fx, cx, cy]
     rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=1, model=model_name, width=world.width,
                                                     height=world.height, params=params))
     for i, (name, c2w) in enumerate(zip(world.names, world.c2w), start=1):
