@@ -23,11 +23,11 @@ from ..io.atomic import write_text_atomic
 from ..io.images import MAX_IMAGE_SIDE
 from .paths import check_name, check_path_text, check_relative, is_inside, resolve_inside
 from .poses import Pose
+from .schema import SCHEMA_PATH, schema_problems  # noqa: F401 - SCHEMA_PATH: where the format is defined
 
 FORMAT = "symdrive-scene"
 VERSION = 1
 ACTOR_KINDS = ("existing", "inserted")
-SCHEMA_PATH = Path(__file__).with_name("manifest.schema.json")
 # Bounds that keep every later computation finite (float32 included) and every allocation small.
 FOCAL_RANGE = (1e-2, 1e7)  # fx, fy in pixels
 PRINCIPAL_MAX = 1e7  # |cx|, |cy|, |skew| in pixels
@@ -378,92 +378,7 @@ def _check_depth(rd: "_Reader", data: Any) -> None:
             stack += [(x, depth + 1, f"{where}[{i}]") for i, x in enumerate(v)]
 
 
-# ---------------------------------------------------------------- ground truth, checked against the schema
-
-_JSON_TYPES = {"object": dict, "array": list, "string": str, "boolean": bool, "null": type(None)}
-_ground_truth_schema: dict | None = None
-
-
-def ground_truth_schema() -> dict:
-    """The ``ground_truth`` definition of ``manifest.schema.json`` (read once)."""
-    global _ground_truth_schema
-    if _ground_truth_schema is None:
-        schema = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
-        _ground_truth_schema = schema["properties"]["ground_truth"]
-    return _ground_truth_schema
-
-
-def _is_type(v: Any, name: str) -> bool:
-    if name == "integer":
-        return isinstance(v, int) and not isinstance(v, bool)
-    if name == "number":
-        return isinstance(v, (int, float)) and not isinstance(v, bool) and bool(np.isfinite(float(v)))
-    return isinstance(v, _JSON_TYPES[name])
-
-
-def _type_word(name: str) -> str:
-    return {"object": "an object", "array": "a list", "string": "a string", "boolean": "true or false",
-            "null": "null", "integer": "an integer", "number": "a finite number"}[name]
-
-
-def check_ground_truth(gt: Any, path: Path) -> None:
-    """Check ``ground_truth`` against its definition in ``manifest.schema.json``: the keywords that
-    definition uses (type, properties, additionalProperties: false, patternProperties, required,
-    items, minItems, maxItems, minimum, exclusiveMinimum, minLength), interpreted here so that the
-    add-on (which has no jsonschema) checks the same. An unknown key is an error naming the field,
-    with the nearest known key as a suggestion."""
-    import difflib
-    import re
-
-    def fail(where: str, message: str):
-        raise ManifestError(path, message, where)
-
-    stack: list[tuple[Any, dict, str]] = [(gt, ground_truth_schema(), "ground_truth")]
-    while stack:
-        v, sch, where = stack.pop()
-        types = sch.get("type")
-        if types is not None:
-            types = [types] if isinstance(types, str) else types
-            if not any(_is_type(v, t) for t in types):
-                fail(where, f"expected {' or '.join(_type_word(t) for t in types)}, got {v!r:.60}")
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            if "minimum" in sch and v < sch["minimum"]:
-                fail(where, f"expected a value >= {sch['minimum']}, got {v}")
-            if "exclusiveMinimum" in sch and not v > sch["exclusiveMinimum"]:
-                fail(where, f"expected a value > {sch['exclusiveMinimum']}, got {v}")
-        elif isinstance(v, str):
-            if len(v) < sch.get("minLength", 0):
-                fail(where, "expected a non-empty string")
-        elif isinstance(v, list):
-            if len(v) < sch.get("minItems", 0):
-                fail(where, f"expected at least {sch['minItems']} entries, got {len(v)}")
-            if "maxItems" in sch and len(v) > sch["maxItems"]:
-                fail(where, f"expected at most {sch['maxItems']} entries, got {len(v)}")
-            if "items" in sch:
-                stack += [(x, sch["items"], f"{where}[{i}]") for i, x in reversed(list(enumerate(v)))]
-        elif isinstance(v, dict):
-            props = sch.get("properties", {})
-            patterns = sch.get("patternProperties", {})
-            children = []
-            for k, x in v.items():
-                if k in props:
-                    children.append((x, props[k], f"{where}.{k}"))
-                    continue
-                match = next((p for p in patterns if re.search(p, k)), None)
-                if match is not None:
-                    children.append((x, patterns[match], f"{where}.{k}"))
-                elif sch.get("additionalProperties", True) is False:
-                    if props:
-                        near = difflib.get_close_matches(k, list(props), n=1)
-                        hint = f"; did you mean {near[0]!r}?" if near else f"; known: {', '.join(props)}"
-                    else:
-                        hint = " (keys are frame indices: 0, 1, ...)"
-                    fail(f"{where}.{k}", f"unknown field{hint}")
-            for k in sch.get("required", []):  # after unknown keys: a misspelling gets its suggestion
-                if k not in v:
-                    fail(f"{where}.{k}", "required field is missing")
-            stack += reversed(children)
-
+# ---------------------------------------------------------------- ground truth: what the schema cannot say
 
 def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -> None:
     """Cameras that ``ground_truth`` names exist; frame indices it gives lie in the package."""
@@ -496,7 +411,9 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
     """A :class:`Manifest` from parsed JSON, every field checked (``path``: the file it came
     from, whose folder is the package root; ``allow_external``: asset paths may lead outside it)."""
     rd = _Reader(path)
-    _check_depth(rd, data)
+    _check_depth(rd, data)  # before the schema, whose validator recurses
+    for where, message in (schema_problems(data) or [])[:1]:
+        rd.fail(where, message)
     d = rd.obj(data, "(root)")
     if d.get("format", FORMAT) != FORMAT:
         rd.fail("format", f"expected {FORMAT!r}, got {d.get('format')!r}")
@@ -667,7 +584,6 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
                       rd.boolean(e.get("finetune", False), "effects.finetune"),
                       rd.boolean(e.get("shadows", False), "effects.shadows"), sun, ratio)
     gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
-    check_ground_truth(gt, path)
     _check_ground_truth_refs(rd, gt, cam_names, nf)
     source = rd.obj(d.get("source", {}), "source")
     if "transform" in source:

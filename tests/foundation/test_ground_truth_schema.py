@@ -62,7 +62,7 @@ CASES = [
     ("ground_truth.heldout", "did you mean 'heldout_frames'?", lambda gt: gt.update(heldout=[1])),
     ("ground_truth.insertion[1].shadowmask", "did you mean 'shadow_mask'?",
      lambda gt: gt["insertion"][1].update(shadowmask="x.png")),
-    ("ground_truth.insertion[0].pose.rotation", "at least 4", lambda gt: gt["insertion"][0]["pose"].update(
+    ("ground_truth.insertion[0].pose.rotation", "expected 4 numbers", lambda gt: gt["insertion"][0]["pose"].update(
         rotation=[1, 0, 0])),
     ("ground_truth.road.lane_widht", "did you mean 'lane_width'?", lambda gt: gt["road"].update(lane_widht=3.0)),
     ("ground_truth.road.lanes", ">= 1", lambda gt: gt["road"].update(lanes=0)),
