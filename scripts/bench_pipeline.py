@@ -34,20 +34,11 @@ CARS = ("insert_0", "insert_1")
 BENCH_FRAMES = (2, 7)  # demo frames whose cameras see both cars ahead
 
 
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """[N, 4] unit quaternions (w, x, y, z) -> [N, 3, 3] rotations."""
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], 1)
-
-
 def densify(g, n: int, seed: int = 0):
     """``g`` split to ``n`` Gaussians: each parent gives ``ceil(n / len(g))`` children placed at
     draws from the parent's own Gaussian, scales divided by the cube root of the child count."""
     from symdrive_core.gaussians import Gaussians
+    from symdrive_core.rotations import quat_to_matrix
 
     if n <= len(g):
         return g

@@ -8,8 +8,8 @@ from mathutils import Matrix, Vector
 from mathutils.bvhtree import BVHTree
 
 from symdrive_core import conventions
+from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Pose
-from symdrive_core.scene.poses import quat_from_yaw
 
 from .street import LANE_WIDTH, PARK_OFFSET, Street
 

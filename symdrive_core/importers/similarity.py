@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..gaussians import Gaussians
-from ..scene.poses import matrix_to_quat, quat_multiply
+from ..rotations import matrix_to_quat, quat_multiply
 
 
 def make_similarity(scale: float, R: np.ndarray, t) -> np.ndarray:

@@ -11,8 +11,8 @@ import numpy as np
 
 from .. import conventions
 from ..gaussians import Gaussians
+from ..rotations import quat_multiply
 from ..scene import Pose
-from ..scene.poses import quat_multiply
 
 
 def place(g: Gaussians, pose: Pose) -> Gaussians:

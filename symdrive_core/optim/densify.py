@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import torch
 
+from ..splat.projection import normalize_quats, quat_to_rotmat
+
 SPLIT_SHRINK = 1.6
 
 
@@ -49,15 +51,6 @@ def ndc_gradient_norm(means2d_grad: torch.Tensor, width: int, height: int) -> to
     gu = means2d_grad[:, 0] * (0.5 * width)
     gv = means2d_grad[:, 1] * (0.5 * height)
     return torch.sqrt(gu * gu + gv * gv)
-
-
-def _quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    q = q / q.norm(dim=1, keepdim=True).clamp_min(1e-12)
-    w, x, y, z = q.unbind(1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
 
 
 def _replace(opt: torch.optim.Optimizer, params: dict[str, torch.nn.Parameter], build) -> None:
@@ -110,7 +103,7 @@ def densify_and_prune(opt, params, stats: GradStats, cfg: DensifyConfig, extent:
         idx = torch.nonzero(split).squeeze(1)
         if len(idx):
             std = scales[idx].repeat(2, 1)
-            rot = _quat_to_matrix(params["quats"][idx]).repeat(2, 1, 1)
+            rot = quat_to_rotmat(normalize_quats(params["quats"][idx])).repeat(2, 1, 1)
             offset = torch.randn(std.shape, generator=generator) * std
             children = {k: v.detach()[idx].repeat(2, *[1] * (v.dim() - 1)) for k, v in params.items()}
             children["means"] = children["means"] + torch.einsum("nij,nj->ni", rot, offset)

@@ -29,7 +29,8 @@ def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: 
     """One pose per frame driving along the world's road, ``lane_right_m`` right of its centre
     line (the ego lane), starting ``start_m`` ahead of the first camera, heading along the road.
     The default speed is 1.1 times the recording camera's, so the car pulls slowly away from it."""
-    from ..scene.poses import Pose, quat_from_yaw
+    from ..rotations import quat_from_yaw
+    from ..scene.poses import Pose
 
     if speed_mps is None:
         centres = [f.camera_to_world[:3, 3] for f in manifest.cameras[0].frames]

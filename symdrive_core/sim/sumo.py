@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scene.poses import Pose, quat_from_yaw
+from ..rotations import quat_from_yaw
+from ..scene.poses import Pose
 from ..traffic.demand import MIN_GAP_M
 from ..traffic.fcd import yaw_from_sumo_angle
 from ..traffic.network import build_network, lane_length

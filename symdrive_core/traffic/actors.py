@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rotations import quat_from_yaw
 from ..scene import Actor, Pose
-from ..scene.poses import quat_from_yaw
 from .assets import Asset
 from .fcd import Track
 from .road import Road

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..gaussians import Gaussians
+from ..rotations import quats_z_to
 
 
 def triangle_areas(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -36,15 +37,6 @@ def sample_surface(verts, tris, n: int, rng: np.random.Generator, weights=None):
     normal = np.cross(b - a, c - a)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     return points, normal, idx
-
-
-def quats_z_to(normals: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) rotating +Z onto each normal (shortest arc)."""
-    n = np.asarray(normals, dtype=np.float64)
-    q = np.stack([1.0 + n[:, 2], -n[:, 1], n[:, 0], np.zeros(len(n))], 1)
-    opposite = q[:, 0] < 1e-8  # normal = -Z: half-turn about X
-    q[opposite] = [0.0, 1.0, 0.0, 0.0]
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def surface_splats(points, normals, colors, spacing: float, flatness: float = 0.1,

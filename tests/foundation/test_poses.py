@@ -3,16 +3,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from symdrive_core.scene.poses import (
-    Pose,
-    interpolate_pose,
-    matrix_to_quat,
-    quat_from_yaw,
-    quat_multiply,
-    quat_slerp,
-    quat_to_matrix,
-    yaw_of,
-)
+from symdrive_core.rotations import matrix_to_quat, quat_from_yaw, quat_multiply, quat_slerp, quat_to_matrix
+from symdrive_core.scene.poses import Pose, interpolate_pose, yaw_of
 
 quats = st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4).filter(
     lambda q: np.linalg.norm(q) > 1e-3)

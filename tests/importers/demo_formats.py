@@ -19,8 +19,8 @@ from symdrive_core.importers.similarity import (
     transform_gaussians,
 )
 from symdrive_core.io.ply import read_splats, write_splats
+from symdrive_core.rotations import quat_normalize, quat_to_matrix
 from symdrive_core.scene import load_manifest
-from symdrive_core.scene.poses import quat_normalize, quat_to_matrix
 from symdrive_core.world.points import read_points, write_points
 
 DEMO = Path(__file__).resolve().parents[2] / "symdrive_core" / "data" / "demo_street"

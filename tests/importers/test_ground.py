@@ -7,7 +7,7 @@ import pytest
 
 from symdrive_core.importers.ground import AlignmentError, alignment, fit_ground
 from symdrive_core.importers.similarity import apply_camera, apply_points, make_similarity
-from symdrive_core.scene.poses import quat_normalize, quat_to_matrix
+from symdrive_core.rotations import quat_normalize, quat_to_matrix
 
 from ..conftest import look_at_c2w
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from symdrive_core.importers.similarity import decompose, make_similarity, rotate_sh, transform_gaussians
-from symdrive_core.scene.poses import quat_normalize, quat_to_matrix
+from symdrive_core.rotations import quat_normalize, quat_to_matrix
 from symdrive_core.splat.sh import eval_sh_torch
 
 from ..conftest import random_gaussians

@@ -8,8 +8,8 @@ from symdrive_core import conventions
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.insertion.composite import CameraView
 from symdrive_core.insertion.mesh_to_splats import TriMesh, mesh_to_splats
+from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Pose
-from symdrive_core.scene.poses import quat_from_yaw
 
 from ..conftest import look_at_c2w
 

@@ -14,8 +14,8 @@ from symdrive_core.insertion.mesh_to_splats import (
 )
 from symdrive_core.insertion.place import ground_height, grounded, place
 from symdrive_core.io.ply import write_splats
+from symdrive_core.rotations import quat_from_yaw, quat_to_matrix
 from symdrive_core.scene import Pose
-from symdrive_core.scene.poses import quat_from_yaw, quat_to_matrix
 from symdrive_core.splat.sh import eval_sh
 from symdrive_core.world.obj import write_obj
 

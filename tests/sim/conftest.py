@@ -4,8 +4,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import load_manifest
-from symdrive_core.scene.poses import Pose, quat_from_yaw
+from symdrive_core.scene.poses import Pose
 
 DEMO = Path(__file__).resolve().parents[2] / "symdrive_core" / "data" / "demo_street"
 

@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from symdrive_core.errors import InputError
+from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Actor, Pose
-from symdrive_core.scene.poses import quat_from_yaw
 from symdrive_core.traffic.fcd import read_fcd
 from symdrive_core.traffic.overlap import (
     OverlapError,

@@ -1,9 +1,8 @@
 import numpy as np
 import pytest
 
-from symdrive_core.scene.poses import quat_to_matrix
+from symdrive_core.rotations import quat_to_matrix, quats_z_to
 from symdrive_core.world.sampling import (
-    quats_z_to,
     sample_surface,
     surface_splats,
     surfel_spacing,
