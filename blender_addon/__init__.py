@@ -2,7 +2,7 @@
 
 Works as a Blender 4.2+ extension (``blender_manifest.toml``) and as a legacy add-on
 (``bl_info``). Submodules are imported in :func:`register`, so the bpy-free helpers
-(``trajectory_io``, ``path_sampling``, ``camera_math``) import without Blender.
+(``path_sampling``, ``camera_math``) import without Blender.
 """
 
 bl_info = {

@@ -33,6 +33,7 @@ atomic = importlib.import_module(f"{CORE}.io.atomic")
 scene = importlib.import_module(f"{CORE}.scene")
 poses = importlib.import_module(f"{CORE}.scene.poses")
 wlh = importlib.import_module(f"{CORE}.insertion.wlh")
+fcd = importlib.import_module(f"{CORE}.traffic.fcd")
 
 
 def images():

@@ -9,8 +9,8 @@ import numpy as np
 from bpy.props import FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
-from .. import actors, keyframes, path_sampling, reference_frame, trajectory_io
-from ..core import errors
+from .. import actors, keyframes, path_sampling, reference_frame
+from ..core import errors, fcd
 from ..core import scene as scene_pkg
 
 
@@ -214,7 +214,7 @@ class SYMDRIVE_OT_import_sumo_fcd(bpy.types.Operator, ImportHelper):
     def execute(self, context):
         scene = context.scene
         try:
-            tracks = trajectory_io.read_fcd(self.filepath)
+            tracks = fcd.read_fcd(self.filepath)
             bg = np.array(reference_frame.background_matrix(scene))
         except errors.SymDriveError as exc:
             self.report({"ERROR"}, str(exc))
@@ -240,7 +240,7 @@ class SYMDRIVE_OT_import_sumo_fcd(bpy.types.Operator, ImportHelper):
         frame_numbers = np.arange(scene.frame_start, scene.frame_end + 1)
         times = self.time_offset + (frame_numbers - scene.frame_start) / _fps(scene)
         for root, track in pairs:
-            pos, yaw, inside = trajectory_io.sample_track(track, times, length=root.symdrive.wlh[1])
+            pos, yaw, inside = fcd.sample_track(track, times, length=root.symdrive.wlh[1])
             pos = pos + np.array(self.offset) + np.array([0.0, 0.0, root.symdrive.ground_offset])
             world = [bg @ M for M in _yaw_matrices(pos[inside], yaw[inside])]
             if world:

@@ -16,26 +16,13 @@ import numpy as np
 from ..rotations import quat_from_yaw
 from ..scene import Actor, Pose
 from .assets import Asset
-from .fcd import Track
+from .fcd import Track, sample_track
 from .road import Road
 
-TIME_EPS = 1e-6
 
-
-def resample(track: Track, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(present [F] bool, centre [F, 2], yaw [F]) at ``times``."""
-    present = (times >= track.times[0] - TIME_EPS) & (times <= track.times[-1] + TIME_EPS)
-    t = np.clip(times, track.times[0], track.times[-1])
-    if len(track.times) == 1:
-        return present, np.repeat(track.centre, len(times), axis=0), np.full(len(times), track.yaw[0])
-    centre = np.stack([np.interp(t, track.times, track.centre[:, i]) for i in range(2)], axis=1)
-    yaw = np.interp(t, track.times, np.unwrap(track.yaw))
-    return present, centre, yaw
-
-
-def track_poses(track: Track, asset: Asset, road: Road, times: np.ndarray) -> list[Pose | None]:
-    present, centre, yaw = resample(track, times)
-    z = road.ground_height(centre) + 0.5 * asset.wlh[2]
+def track_poses(track: Track, asset: Asset, road: Road, times: np.ndarray, net_offset=(0.0, 0.0)) -> list[Pose | None]:
+    centre, yaw, present = sample_track(track, times, asset.length, net_offset)
+    z = road.ground_height(centre[:, :2]) + 0.5 * asset.wlh[2]
     return [Pose(np.array([centre[i, 0], centre[i, 1], z[i]]), quat_from_yaw(float(yaw[i]))) if present[i]
             else None for i in range(len(times))]
 
@@ -45,13 +32,14 @@ def _relative(path: Path | None, root: Path) -> str | None:
 
 
 def traffic_actors(tracks: dict[str, Track], assets: dict[str, Asset], road: Road, times: np.ndarray,
-                   package_root: Path) -> list[Actor]:
-    """Inserted actors, in order of first appearance; asset paths relative to ``package_root``."""
+                   package_root: Path, net_offset=(0.0, 0.0)) -> list[Actor]:
+    """Inserted actors, in order of first appearance; asset paths relative to ``package_root``;
+    ``net_offset``: the SUMO network's offset from the scene frame."""
     actors = []
     ordered = sorted(tracks.values(), key=lambda tr: (tr.times[0], tr.vehicle))
     for track in ordered:
         asset = assets[track.vtype]
-        poses = track_poses(track, asset, road, times)
+        poses = track_poses(track, asset, road, times, net_offset)
         if all(p is None for p in poses):
             continue
         actors.append(Actor(track.vehicle, "inserted", _relative(asset.splats, package_root),

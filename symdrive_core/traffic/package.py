@@ -39,7 +39,7 @@ def traffic_manifest(src: Manifest, road: Road, run: TrafficRun, assets: list[As
     """The new manifest (rooted at ``out``) and its gap report; raises if any boxes overlap."""
     src_root, out = src.root.resolve(), out.resolve()
     times = np.array([f.timestamp for f in src.frames]) + run.time_offset
-    actors = traffic_actors(run.tracks, {a.name: a for a in assets}, road, times, out)
+    actors = traffic_actors(run.tracks, {a.name: a for a in assets}, road, times, out, run.network.offset)
     gaps = check_actors(actors, len(src.frames))
     require_no_overlap(gaps)
     cameras = [replace(c, frames=[CameraFrame(cf.K, cf.camera_to_world, cf.world_to_camera,

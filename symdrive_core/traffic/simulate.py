@@ -41,7 +41,7 @@ class TrafficOptions:
 
 @dataclass
 class TrafficRun:
-    tracks: dict[str, Track]
+    tracks: dict[str, Track]  # as SUMO wrote them: front bumpers in network coordinates
     network: Network
     vehicles_at_start: int
     sumo_seconds: float  # wall time of the SUMO run alone
@@ -86,7 +86,6 @@ def simulate(road: Road, frame_times: np.ndarray, assets: list[Asset], opt: Traf
             "--max-depart-delay", f"{MAX_DEPART_DELAY_S}", "--collision.action", "warn",
             "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true"]
     time_offset = opt.seconds - float(frame_times[-1])
-    lengths = {a.name: a.length for a in assets}
     t0 = time.perf_counter()
     log: list[dict] = []
     if opt.manoeuvres:
@@ -99,5 +98,5 @@ def simulate(road: Road, frame_times: np.ndarray, assets: list[Asset], opt: Traf
     else:
         run_tool("sumo", args, opt.timeout, workdir)
     sumo_seconds = time.perf_counter() - t0
-    tracks = read_fcd(workdir / "fcd.xml", lengths, net.offset)
+    tracks = read_fcd(workdir / "fcd.xml")
     return TrafficRun(tracks, net, at_start, sumo_seconds, time_offset, log)

@@ -5,9 +5,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from blender_addon import camera_math, path_sampling, trajectory_io
+from blender_addon import camera_math, path_sampling
 from symdrive_core import conventions
 from symdrive_core.errors import InputError
+from symdrive_core.traffic import fcd
 
 
 def test_polyline_samples_by_arc_length_with_smooth_tangents():
@@ -44,23 +45,23 @@ def test_fcd_angles_become_yaw_and_the_bumper_moves_to_the_centre(tmp_path):
         f'<vehicle id="b" x="0" y="{5 * t}" z="1.5" angle="0" speed="5"/></timestep>'
         for t in (0, 1, 2)
     )
-    tracks = trajectory_io.read_fcd(_fcd(tmp_path, body))
+    tracks = fcd.read_fcd(_fcd(tmp_path, body))
     assert sorted(tracks) == ["a", "b"]
     np.testing.assert_allclose(tracks["a"].yaw, 0.0, atol=1e-12)
     np.testing.assert_allclose(tracks["b"].yaw, np.pi / 2)
-    pos, _, inside = trajectory_io.sample_track(tracks["a"], [-1.0, 0.5, 2.0, 3.0], length=4.0)
+    pos, _, inside = fcd.sample_track(tracks["a"], [-1.0, 0.5, 2.0, 3.0], length=4.0)
     np.testing.assert_array_equal(inside, [False, True, True, False])
     np.testing.assert_allclose(pos[1], [5.0 - 2.0, 0.0, 0.0], atol=1e-12)
-    pos_b, _, _ = trajectory_io.sample_track(tracks["b"], [1.0], length=4.0)
+    pos_b, _, _ = fcd.sample_track(tracks["b"], [1.0], length=4.0)
     np.testing.assert_allclose(pos_b[0], [0.0, 3.0, 1.5], atol=1e-12)
-    assert trajectory_io.yaw_to_sumo_angle(trajectory_io.sumo_angle_to_yaw(271.0)) == pytest.approx(271.0)
+    assert fcd.yaw_to_sumo_angle(fcd.yaw_from_sumo_angle(271.0)) == pytest.approx(271.0)
 
 
 def test_fcd_heading_across_north_does_not_spin():
-    track = trajectory_io.Track(
-        "v", np.array([0.0, 1.0]), np.zeros((2, 2)), np.zeros(2), np.array([350.0, 10.0]), np.zeros(2)
+    track = fcd.Track(
+        "v", "car", np.array([0.0, 1.0]), np.zeros((2, 2)), np.zeros(2), np.array([350.0, 10.0]), np.zeros(2)
     )
-    _, yaw, _ = trajectory_io.sample_track(track, [0.5])
+    _, yaw, _ = fcd.sample_track(track, [0.5])
     assert np.degrees(yaw[0]) % 360 == pytest.approx(90.0)  # due north, not a 180-degree swing
 
 
@@ -78,14 +79,14 @@ def test_fcd_heading_across_north_does_not_spin():
 )
 def test_fcd_errors_name_the_field(tmp_path, body, field):
     with pytest.raises(InputError, match=field.replace("[", r"\[").replace("]", r"\]")):
-        trajectory_io.read_fcd(_fcd(tmp_path, body))
+        fcd.read_fcd(_fcd(tmp_path, body))
 
 
 def test_fcd_rejects_other_xml(tmp_path):
     p = tmp_path / "net.xml"
     p.write_text("<net/>")
     with pytest.raises(InputError, match="expected <fcd-export>"):
-        trajectory_io.read_fcd(p)
+        fcd.read_fcd(p)
 
 
 @settings(max_examples=60, deadline=None)

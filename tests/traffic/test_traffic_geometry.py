@@ -79,12 +79,13 @@ def test_fcd_front_bumper_and_angle_become_box_centre_and_yaw(tmp_path):
   <vehicle id="b" x="115.0" y="205.0" angle="90.00" type="van" speed="2.0"/></timestep>
  <timestep time="0.10"><vehicle id="a" x="110.0" y="220.1" angle="0.00" type="car" speed="1.0"/></timestep>
 </fcd-export>""")
-    tracks = read_fcd(fcd, {"car": 4.0, "van": 6.0}, net_offset=(100.0, 200.0))
+    tracks = read_fcd(fcd)
     a, b = tracks["a"], tracks["b"]
     np.testing.assert_allclose(a.times, [0.0, 0.1])
-    np.testing.assert_allclose(a.centre, [[10.0, 18.0], [10.0, 18.1]])  # north: centre 2 m south of the front
+    # north: centre 2 m south of the front
+    np.testing.assert_allclose(a.centre(4.0, (100.0, 200.0)), [[10.0, 18.0], [10.0, 18.1]])
     np.testing.assert_allclose(a.yaw, np.pi / 2)
-    np.testing.assert_allclose(b.centre, [[12.0, 5.0]])  # east: 3 m west of the front
+    np.testing.assert_allclose(b.centre(6.0, (100.0, 200.0)), [[12.0, 5.0]])  # east: 3 m west of the front
     np.testing.assert_allclose(b.yaw, 0.0, atol=1e-12)
     assert b.vtype == "van" and b.speed[0] == 2.0
 
