@@ -23,8 +23,8 @@ import numpy as np
 
 from symdrive_core import conventions
 from symdrive_core.io.images import write_image, write_mask
+from symdrive_core.io.points import write_points
 from symdrive_core.scene import Actor, Camera, CameraFrame, Effects, Frame, Manifest, MaskEntry, Pose
-from symdrive_core.world.points import write_points
 from symdrive_core.world.projection import colour_points
 from symdrive_core.world.sampling import sample_surface
 

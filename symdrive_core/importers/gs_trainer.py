@@ -133,7 +133,7 @@ def read_gs_output(model: str | Path, images: str | Path | None, *, iteration: i
     g = read_splats(ply)
     points = colors = None
     if (model / "input.ply").is_file():
-        from ..world.points import read_points
+        from ..io.points import read_points
 
         p, c = read_points(model / "input.ply")
         points, colors = p.astype(np.float64), c.astype(np.float64)

@@ -125,7 +125,7 @@ def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None,
     points = colors = None
     ply = data.get("ply_file_path")
     if isinstance(ply, str) and ply:
-        from ..world.points import read_points
+        from ..io.points import read_points
 
         if not (base / ply).is_file():
             raise InputError(path, f"file not found: {ply}", "ply_file_path")

@@ -85,8 +85,8 @@ def write_package(src: Source, opt: Options) -> dict:
     outside itself)."""
     from ..io.atomic import atomic_directory
     from ..io.ply import write_splats
+    from ..io.points import write_points
     from ..scene.manifest import check_files, load_manifest, parse_manifest
-    from ..world.points import write_points
 
     out = Path(opt.out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):

@@ -216,7 +216,8 @@ def _splat_layout(path: Path, names: list[str]) -> tuple[bool, int]:
     return surfels, k
 
 
-def _read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
+def read_vertex_table(path: Path, header: PlyHeader) -> np.ndarray:
+    """The vertex element of a point or splat PLY (binary or ASCII) as one structured array."""
     vertex = header.element("vertex")
     if vertex is None:
         raise InputError(path, "no 'vertex' element: not a point or splat file", "element vertex")
@@ -306,7 +307,7 @@ def read_splats(path: str | os.PathLike, *, drop_invalid: bool = False) -> Gauss
     """
     path = Path(path)
     header = read_header(path)
-    table = _read_vertex_table(path, header)
+    table = read_vertex_table(path, header)
     names = list(table.dtype.names or ())
     if compressed_ply.is_compressed([e.name for e in header.elements], names):
         if header.fmt == "ascii":

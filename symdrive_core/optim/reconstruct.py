@@ -24,9 +24,9 @@ from ..gaussians import Gaussians, rgb_to_sh_dc, sh_coeff_count
 from ..io.atomic import atomic_path, write_text_atomic
 from ..io.images import read_image
 from ..io.ply import read_splats, write_splats
+from ..io.points import read_points
 from ..scene import Manifest
 from ..world.package import split_frames
-from ..world.points import read_points
 from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
 from .losses import photometric
 

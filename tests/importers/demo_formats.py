@@ -19,9 +19,9 @@ from symdrive_core.importers.similarity import (
     transform_gaussians,
 )
 from symdrive_core.io.ply import read_splats, write_splats
+from symdrive_core.io.points import read_points, write_points
 from symdrive_core.rotations import quat_normalize, quat_to_matrix
 from symdrive_core.scene import load_manifest
-from symdrive_core.world.points import read_points, write_points
 
 DEMO = Path(__file__).resolve().parents[2] / "symdrive_core" / "data" / "demo_street"
 CAMERA_HEIGHT = 1.6  # the demo camera's height above the road, metres

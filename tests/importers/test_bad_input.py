@@ -143,7 +143,7 @@ def test_nan_pose_in_3dgs_cameras(world, tmp_path, capsys):
 
 
 def test_no_ground_says_how_to_pass_up(world, tmp_path, capsys):
-    from symdrive_core.world.points import write_points
+    from symdrive_core.io.points import write_points
 
     model = write_gs_output(world, tmp_path / "run", tmp_path / "data" / "images")
     cams = json.loads((model / "cameras.json").read_text())

@@ -9,9 +9,9 @@ import torch
 from symdrive_core import conventions
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.io.images import write_image
+from symdrive_core.io.points import write_points
 from symdrive_core.scene import Camera, CameraFrame, Frame, Manifest
 from symdrive_core.splat.tensors import GaussianTensors
-from symdrive_core.world.points import write_points
 from tests.conftest import look_at_c2w
 
 W, H = 48, 32

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from symdrive_core.io.images import read_image, read_mask
+from symdrive_core.io.points import read_points
 from symdrive_core.scene import check_files, load_manifest
-from symdrive_core.world.points import read_points
 
 pytest.importorskip("bpy")
 pytestmark = [pytest.mark.blender, pytest.mark.slow]  # ~15-35 s: Blender start + Cycles

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_path
-from ..io.ply import read_header
+from .atomic import atomic_path
+from .ply import read_header, read_vertex_table
 
 _DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"),
                    ("red", "u1"), ("green", "u1"), ("blue", "u1")])
@@ -43,20 +43,14 @@ def write_points(path: str | os.PathLike, points, colors, normals=None) -> Path:
 
 
 def read_points(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """(points [N,3] float32, colours [N,3] float32 in [0, 1]) from a binary point PLY."""
+    """(points [N,3] float32, colours [N,3] float32 in [0, 1]) from a point PLY, binary or ASCII,
+    read by the same vertex reader as splat files (sizes checked against the header)."""
     path = Path(path)
-    header = read_header(path)
-    vertex = header.element("vertex")
-    if header.fmt == "ascii" or vertex is None or header.elements[0] is not vertex or vertex.has_lists:
-        raise InputError(path, "expected a binary PLY whose first element is 'vertex'", "header")
-    dtype = np.dtype([(name, header.fmt + t) for name, t in vertex.properties])
-    missing = [c for c in ("x", "y", "z", "red", "green", "blue") if c not in dtype.names]
+    table = read_vertex_table(path, read_header(path))
+    missing = [c for c in ("x", "y", "z", "red", "green", "blue") if c not in table.dtype.names]
     if missing:
         raise InputError(path, f"point cloud lacks {', '.join(missing)}", "element vertex")
-    table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=header.data_offset)
-    if len(table) != vertex.count:
-        raise InputError(path, f"truncated: {len(table)} of {vertex.count} vertices", "element vertex")
     pts = np.stack([table[c] for c in "xyz"], 1).astype(np.float32)
-    scale = 255.0 if np.issubdtype(dtype["red"], np.integer) else 1.0
+    scale = 255.0 if np.issubdtype(table.dtype["red"], np.integer) else 1.0
     rgb = np.stack([table[c] for c in ("red", "green", "blue")], 1).astype(np.float32) / scale
     return pts, rgb
