@@ -177,13 +177,15 @@ def json_target(value: str) -> str:
 def add_json_option(p: argparse.ArgumentParser, what: str, *, optional_file: bool = True) -> None:
     """``--json [FILE]``: the result as JSON, to FILE (written atomically) or, bare or ``-``, to stdout.
 
-    ``optional_file=False`` (commands that print JSON anyway) makes FILE required.
+    ``optional_file=False`` is for commands that print JSON anyway: FILE is required and ``-``
+    adds nothing to what is printed.
     """
     if optional_file:
         p.add_argument("--json", type=json_target, nargs="?", const="-", metavar="FILE",
                        help=f"{what} as JSON: to FILE, or to stdout when bare or FILE is -")
     else:
-        p.add_argument("--json", type=json_target, metavar="FILE", help=f"also write {what} to FILE (- : stdout)")
+        p.add_argument("--json", type=json_target, metavar="FILE",
+                       help=f"also write {what} (printed as JSON in any case) to FILE; - writes no file")
 
 
 def write_json(obj, target: str) -> None:
@@ -201,12 +203,11 @@ def add_quiet_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def add_renamed_option(p: argparse.ArgumentParser, flag: str, old: str, **kwargs) -> argparse.Action:
+def add_renamed_option(p: argparse.ArgumentParser, flag: str, old: str, **kwargs) -> None:
     """``flag`` with its former spelling ``old`` still accepted (same value, not in ``--help``), so
     scripts written before the rename keep working; giving both is an error."""
     group = p.add_mutually_exclusive_group(required=kwargs.pop("required", False))
     action = group.add_argument(flag, **kwargs)
     group.add_argument(old, dest=action.dest, type=action.type, metavar=action.metavar,
                        default=argparse.SUPPRESS, help=argparse.SUPPRESS)
-    return action
 

@@ -7,7 +7,9 @@ from pathlib import Path
 import pytest
 
 from symdrive_core.cli import build_parser, frames_arg, main
+from symdrive_core.io.ply import write_splats
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
+from tests.conftest import random_gaussians
 
 PKG = str(DEMO_PACKAGE)
 
@@ -160,6 +162,24 @@ def test_plan_json_file_holds_what_bare_json_prints(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["again.json", "plan.json"]  # no temporary left
     assert main(["plan", PKG, "--json", "-"]) == 0
     assert json.loads(capsys.readouterr().out) == printed
+
+
+def test_info_json_file_holds_what_bare_json_prints(tmp_path, capsys):
+    ply = tmp_path / "splats.ply"
+    write_splats(ply, random_gaussians(20, 1, 0))
+    assert main(["info", str(ply), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["count"] == 20 and printed["sh_degree"] == 1
+    assert main(["info", str(ply), "--json", str(tmp_path / "info.json")]) == 0
+    assert capsys.readouterr().out == "" and json.loads((tmp_path / "info.json").read_text()) == printed
+
+
+def test_insert_eval_json_takes_a_file_or_stdout(tmp_path):
+    parse = build_parser().parse_args
+    base = ["insert-eval", PKG, "--gaussians", "bg.ply"]
+    assert parse([*base, "--json", "-"]).json == "-"
+    assert parse([*base, "--json", str(tmp_path / "rows.json")]).json == str(tmp_path / "rows.json")
+    assert parse(base).json is None
 
 
 # Every command that runs long enough for a progress bar, with what else it needs to parse.
