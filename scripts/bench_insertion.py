@@ -2,7 +2,7 @@
 fine-tune time, and harmonization quality against sampler steps.
 
     python scripts/bench_insertion.py --package symdrive_core/data/demo_street \
-        --background out/recon/background.ply --steps 5 10 25 50 --out bench_insertion.json
+        --gaussians out/recon/background.ply --steps 5 10 25 50 --out bench_insertion.json
 
 Needs the package's ``ground_truth.insertion`` (Cycles renders of the vehicle truly in the scene)
 and the built-in restorer. Rows follow REPORT.md's ``metrics.insertion``.
@@ -20,10 +20,10 @@ from pathlib import Path
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--package", required=True, type=Path)
-    p.add_argument("--background", required=True, type=Path, help="background splat PLY (the reconstruction)")
+    p.add_argument("--gaussians", required=True, type=Path, help="reconstruction PLY")
     p.add_argument("--steps", type=int, nargs="*", default=[5, 10, 25, 50], help="sampler steps to sweep")
     p.add_argument("--main-steps", type=int, help="steps for the full run of every method (default: the restorer's)")
-    p.add_argument("--finetune-steps", type=int, default=300)
+    p.add_argument("--finetune-iters", type=int, default=300, help="colour/opacity fine-tune iterations")
     p.add_argument("--train-views", type=int, default=6)
     p.add_argument("--features-module", help="extractor for the Frechet distance (FILE.py:FN, MODULE:FN, .pt)")
     p.add_argument("--out", type=Path, default=Path("bench_insertion.json"))
@@ -39,14 +39,14 @@ def main(argv=None) -> int:
     from symdrive_core.scene import load_manifest
 
     manifest = load_manifest(args.package)
-    background = read_splats(args.background, drop_invalid=True)
+    background = read_splats(args.gaussians, drop_invalid=True)
     restorer = load_restorer()
     extractor = load_extractor(args.features_module) if args.features_module else None
     result: dict = {"package": str(args.package), "sweep": []}
 
     details: dict = {}
     t0 = time.perf_counter()
-    cfg = InsertionConfig(train_views=args.train_views, finetune=FinetuneConfig(steps=args.finetune_steps))
+    cfg = InsertionConfig(train_views=args.train_views, finetune=FinetuneConfig(steps=args.finetune_iters))
     result["insertion"] = evaluate_insertion(manifest, background, harmonizer=restorer_harmonizer(
         restorer, steps=args.main_steps), config=cfg, extractor=extractor, details=details)
     result["seconds"] = round(time.perf_counter() - t0, 2)

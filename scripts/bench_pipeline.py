@@ -111,7 +111,7 @@ def main(argv=None) -> int:
     p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
                    help="memory for one restorer evaluation (StageOptions.max_memory_gib)")
     p.add_argument("--samples", type=int, help="restoration samples per view (default: the pipeline's)")
-    p.add_argument("--finetune-steps", type=int, default=100)
+    p.add_argument("--finetune-iters", type=int, default=100)
     p.add_argument("--refine-iters", type=int, default=0, help="3DGS refinement iterations (0: not run)")
     p.add_argument("--keep", type=Path, help="build the package here and keep it (default: a temporary folder)")
     p.add_argument("--json", type=Path, help="also write the results here")
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         build_package(root / "package", width, height, gaussians, frames)
         build_s = time.perf_counter() - t0
-        opts = StageOptions(max_memory_gib=args.max_memory, finetune_steps=args.finetune_steps,
+        opts = StageOptions(max_memory_gib=args.max_memory, finetune_steps=args.finetune_iters,
                             refine_iters=max(args.refine_iters, 1))
         if args.samples:
             opts.samples = args.samples

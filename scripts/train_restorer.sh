@@ -14,8 +14,8 @@ export NUMBA_NUM_THREADS=2 OMP_NUM_THREADS=2
 
 symdrive make-pairs "$PACKAGE" --offsets 0.5,1,1.5,2,2.5,3 --cycle=-3,-2,-1,1,2,3 --out "$WORK/pairs.safetensors"
 # defaults: --output skip --t-max 0.85 --full-fraction 0.1 --batch 8 --crop 64 --lr 4e-4
-symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/stage1" --steps 9000 --ema 0.999 --seed 0 \
+symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/stage1" --iters 9000 --ema 0.999 --seed 0 \
   --threads 2 --degraded-fraction 0
 symdrive train-restorer "$WORK/pairs.safetensors" --out "$WORK/stage2" --init "$WORK/stage1/restorer.safetensors" \
-  --steps 3000 --seed 1 --threads 2 --degraded-fraction 0.5
+  --iters 3000 --seed 1 --threads 2 --degraded-fraction 0.5
 cp "$WORK/stage2/restorer.safetensors" "$WORK/stage2/restorer.json" symdrive_core/diffusion/weights/

@@ -31,8 +31,19 @@ COMMAND_MODULES = [
 ]
 
 
+class _Parser(argparse.ArgumentParser):
+    """Unknown options are reported by the command given them (``symdrive plan: error: ...``),
+    not by the top-level parser, which would leave the command's name out."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras and self._subparsers is None:  # a command, not a group of commands
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="symdrive", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="symdrive", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
@@ -120,4 +131,83 @@ def _version() -> str:
 
 def print_json(obj) -> None:
     print(json.dumps(obj, indent=1))
+
+
+def frames_arg(text: str) -> list[int]:
+    """``--frames`` of every command: ``0:3,7,10:12``, single indices and inclusive ranges ``A:B``.
+
+    One syntax for every command, so a list that works for ``render`` works for ``restore``.
+    Returns the indices in order, duplicates dropped; whether the package has them is checked
+    by the command once it has read the package.
+    """
+    frames: dict[int, None] = {}  # ordered, without repeats
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            raise argparse.ArgumentTypeError(f"empty item in {text!r} (expected e.g. 0:3,7)")
+        if item.startswith("-"):
+            raise argparse.ArgumentTypeError(f"frame indices are 0 or more, got {item!r}")
+        ends = item.split(":")
+        if len(ends) > 2 or not all(e.strip().isdecimal() for e in ends):
+            raise argparse.ArgumentTypeError(f"expected frame indices A or ranges A:B (e.g. 0:3,7), got {item!r}")
+        a, b = int(ends[0]), int(ends[-1])
+        if b < a:
+            raise argparse.ArgumentTypeError(f"range {item!r} runs backwards (expected A:B with A <= B)")
+        frames.update(dict.fromkeys(range(a, b + 1)))
+    return list(frames)
+
+
+def add_frames_option(p: argparse.ArgumentParser, flag: str = "--frames", *, help: str) -> None:
+    """A frame-list option (``--frames``, ``--refine-frames``) in the one syntax of :func:`frames_arg`."""
+    p.add_argument(flag, type=frames_arg, metavar="LIST", help=f"{help}; LIST as 0:3,7 (ranges inclusive)")
+
+
+def json_target(value: str) -> str:
+    """``--json`` FILE or ``-`` (stdout); the folder must exist, so a typo fails before the work."""
+    if value == "-":
+        return value
+    parent = os.path.dirname(os.path.abspath(value))
+    if os.path.isdir(value):
+        raise argparse.ArgumentTypeError(f"{value!r} is a folder, expected a file")
+    if not os.path.isdir(parent):
+        raise argparse.ArgumentTypeError(f"folder {parent!r} does not exist")
+    return value
+
+
+def add_json_option(p: argparse.ArgumentParser, what: str, *, optional_file: bool = True) -> None:
+    """``--json [FILE]``: the result as JSON, to FILE (written atomically) or, bare or ``-``, to stdout.
+
+    ``optional_file=False`` is for commands that print JSON anyway: FILE is required and ``-``
+    adds nothing to what is printed.
+    """
+    if optional_file:
+        p.add_argument("--json", type=json_target, nargs="?", const="-", metavar="FILE",
+                       help=f"{what} as JSON: to FILE, or to stdout when bare or FILE is -")
+    else:
+        p.add_argument("--json", type=json_target, metavar="FILE",
+                       help=f"also write {what} (printed as JSON in any case) to FILE; - writes no file")
+
+
+def write_json(obj, target: str) -> None:
+    """Where ``--json`` points: ``-`` prints, a path is written whole or not at all."""
+    if target == "-":
+        print_json(obj)
+        return
+    from ..io.atomic import write_text_atomic
+
+    write_text_atomic(target, json.dumps(obj, indent=1) + "\n")
+
+
+def add_quiet_option(p: argparse.ArgumentParser) -> None:
+    """``--quiet`` of every long command; handlers pass ``progress=not args.quiet`` to the library."""
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def add_renamed_option(p: argparse.ArgumentParser, flag: str, old: str, **kwargs) -> None:
+    """``flag`` with its former spelling ``old`` still accepted (same value, not in ``--help``), so
+    scripts written before the rename keep working; giving both is an error."""
+    group = p.add_mutually_exclusive_group(required=kwargs.pop("required", False))
+    action = group.add_argument(flag, **kwargs)
+    group.add_argument(old, dest=action.dest, type=action.type, metavar=action.metavar,
+                       default=argparse.SUPPRESS, help=argparse.SUPPRESS)
 

@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
-from . import count_int, positive_int
+from . import add_frames_option, add_quiet_option, add_renamed_option, count_int, device_arg, positive_int
 
 
 def _floats(text: str) -> list[float]:
@@ -18,10 +18,6 @@ def _floats(text: str) -> list[float]:
         return [float(v) for v in text.split(",") if v.strip()]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from exc
-
-
-def _ints(text: str) -> list[int]:
-    return [int(v) for v in _floats(text)]
 
 
 def _distances(text: str) -> list[float]:
@@ -46,12 +42,12 @@ def add_commands(sub) -> None:
     )
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument(
-        "--gaussians", type=Path, help="reconstruction PLY (default: the manifest's background splats)"
+        "--gaussians", type=Path, metavar="PLY", help="reconstruction PLY (default: the manifest's background splats)"
     )
     p.add_argument(
         "--offsets", type=_distances, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
     )
-    p.add_argument("--frames", type=_ints, help="recorded frames (default: the training frames)")
+    add_frames_option(p, help="recorded frames (default: the training frames)")
     p.add_argument(
         "--cycle",
         type=_signed_offsets,
@@ -69,22 +65,23 @@ def add_commands(sub) -> None:
         help="densification cap of each cycle reconstruction",
     )
     p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_make_pairs)
 
     p = sub.add_parser("train-restorer", help="train the built-in restorer on a pairs file (CPU)")
     p.add_argument("pairs", type=Path, help="pairs file from `symdrive make-pairs`")
     p.add_argument("--out", type=Path, required=True, help="folder for weights, record and checkpoint")
+    add_renamed_option(p, "--iters", "--steps", type=positive_int, help="training iterations (default 3000)")
     for flag, kind, text in (
-        ("--steps", positive_int, "training steps (default 3000)"),
-        ("--batch", positive_int, "crops per step (default 8)"),
+        ("--batch", positive_int, "crops per iteration (default 8)"),
         ("--crop", positive_int, "square crop size in pixels (default 64)"),
         ("--lr", float, "peak learning rate (default 4e-4)"),
         ("--ema", float, "EMA decay of the shipped weights (default 0.999)"),
         ("--width", positive_int, "UNet base width (default 24)"),
         ("--seed", int, "seed of every batch and noise draw (default 0)"),
         ("--threads", positive_int, "torch threads (default 1)"),
-        ("--checkpoint-every", positive_int, "steps between checkpoints (default 250)"),
+        ("--checkpoint-every", positive_int, "iterations between checkpoints (default 250)"),
         (
             "--t-max",
             float,
@@ -112,11 +109,12 @@ def add_commands(sub) -> None:
     p.add_argument("--lora-alpha", type=float, help="flux: LoRA alpha (default: the rank)")
     p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
                    help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
-    p.add_argument("--grad-accum", type=positive_int, help="flux: gradient accumulation steps (default 1)")
-    p.add_argument("--warmup", type=count_int, help="learning-rate warm-up steps (default 100)")
+    p.add_argument("--grad-accum", type=positive_int, help="flux: batches accumulated per iteration (default 1)")
+    p.add_argument("--warmup", type=count_int, help="learning-rate warm-up iterations (default 100)")
     p.add_argument("--mixed-precision", choices=["auto", "no", "bf16", "fp16"],
                    help="flux: auto (default) is bf16 on CUDA, float32 on the CPU")
     p.add_argument("--no-gradient-checkpointing", action="store_true", help="flux: keep all activations")
+    add_quiet_option(p)
     p.set_defaults(func=_train)
 
     p = sub.add_parser("flux-prompt", help="write the prompt-embedding file of --backend flux from local T5 / CLIP")
@@ -126,13 +124,13 @@ def add_commands(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help=".safetensors to write")
     p.add_argument("--text", help="the prompt (default: diffusion.flux_prompt.DEFAULT_PROMPT)")
     p.add_argument("--max-length", type=positive_int, default=512, help="T5 tokens (default 512, FLUX.1-dev's)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.set_defaults(func=_flux_prompt)
 
     p = sub.add_parser("restore", help="restore lateral views auto-regressively (and evaluate / refine)")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument(
-        "--gaussians", type=Path, help="reconstruction PLY (default: the manifest's background splats)"
+        "--gaussians", type=Path, metavar="PLY", help="reconstruction PLY (default: the manifest's background splats)"
     )
     p.add_argument(
         "--offsets",
@@ -142,8 +140,7 @@ def add_commands(sub) -> None:
              "scoring covers every offset with ground truth)",
     )
     p.add_argument("--step", type=float, default=0.5, help="chain step d in metres (0 = single-view)")
-    p.add_argument("--frames", type=_ints,
-                   help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
+    add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=positive_int, help="sampler steps (default: 5 builtin, 50 flux)")
     p.add_argument("--n-start", type=count_int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
     p.add_argument("--seed", type=int, default=0, help="sampler noise seed (default 0)")
@@ -165,8 +162,8 @@ def add_commands(sub) -> None:
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
     p.add_argument("--refine-iters", type=positive_int, default=900, help="refinement iterations of --refine (default 900)")
-    p.add_argument("--refine-frames", type=_ints,
-                   help="recorded frames whose restored lateral views --refine trains on (default: all)")
+    add_frames_option(p, "--refine-frames",
+                      help="recorded frames whose restored lateral views --refine trains on (default: all)")
     p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
                    help="restorer: builtin (the shipped network) or flux (FLUX.1-dev from the files named below)")
     p.add_argument("--weights", type=Path, help="built-in restorer weights (default: the shipped ones)")
@@ -175,6 +172,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_restore)
 
@@ -202,7 +200,8 @@ def _make_pairs(args) -> int:
     manifest, gaussians = _load_scene(args)
     cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
     out = make_pairs(
-        manifest, gaussians, args.offsets, args.out, frames=args.frames, cycle_offsets=args.cycle, cycle_config=cycle
+        manifest, gaussians, args.offsets, args.out, frames=args.frames, cycle_offsets=args.cycle, cycle_config=cycle,
+        progress=not args.quiet,
     )
     print(f"wrote {out}")
     return 0
@@ -224,11 +223,14 @@ def _train(args) -> int:
         raise InputError("train-restorer", "needs --backend flux", "--" + given[0].replace("_", "-"))
 
     cfg = TrainConfig()
-    names = ("steps", "batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
+    names = ("batch", "crop", "lr", "ema", "width", "seed", "threads", "checkpoint_every")
     for name in (*names, "t_max", "full_fraction", "output", "degraded_fraction", "init", "warmup"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
-    record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation)
+    if args.iters is not None:
+        cfg.steps = args.iters
+    record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation,
+                            progress=not args.quiet)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "data")})
     return 0
 
@@ -243,21 +245,20 @@ def _train_flux(args) -> int:
         if getattr(args, name) is not None:
             raise InputError("train-restorer", "not used by --backend flux", "--" + name.replace("_", "-"))
     cfg = FluxTrainConfig()
-    names = ("steps", "batch", "crop", "lr", "seed", "threads", "checkpoint_every", "rank", "warmup",
+    names = ("batch", "crop", "lr", "seed", "threads", "checkpoint_every", "rank", "warmup",
              "grad_accum", "mixed_precision", "degraded_fraction")
     for name in names:
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
+    if args.iters is not None:
+        cfg.steps = args.iters
     if args.lora_alpha is not None:
         cfg.alpha = args.lora_alpha
     if args.lora_targets is not None:
         cfg.targets = args.lora_targets
     cfg.gradient_checkpointing = not args.no_gradient_checkpointing
-    for name in ("steps", "batch", "crop", "rank", "grad_accum", "checkpoint_every"):
-        if getattr(cfg, name) < 1:
-            raise InputError("train-restorer", f"must be at least 1, got {getattr(cfg, name)}", "--" + name.replace("_", "-"))
     record = train_flux_lora(args.pairs, args.out, args.flux_transformer, args.flux_vae, args.prompt, cfg,
-                             resume=args.resume, command=args.invocation)
+                             resume=args.resume, command=args.invocation, progress=not args.quiet)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "seconds_per_step", "peak_gpu_memory_gib",
                                        "data")})
     return 0
@@ -330,7 +331,7 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 
     cam = lateral_camera(manifest)
     views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
-                                  sampler=sampler)
+                                  sampler=sampler, progress=not args.quiet)
     index = []
     for v in views:
         rel = f"{v.offset_m:+.2f}/{v.frame:06d}.png"
@@ -349,7 +350,7 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     methods = ("single_view", "ar_d0.5", "ar_d1.0")
     t0 = time.perf_counter()
     result = run_lateral_restoration(
-        manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames
+        manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames, progress=not args.quiet
     )
     rows = score_gaussians(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
@@ -361,14 +362,14 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
         # ones) at --offsets, restored by the chain with --step; scored chains are reused.
         t0 = time.perf_counter()
         views = restore_lateral_views(manifest, gaussians, restorer, args.refine_frames, args.offsets, args.step,
-                                      sampler=sampler, chains=result.chains)
+                                      sampler=sampler, chains=result.chains, progress=not args.quiet)
         restore_seconds = round(time.perf_counter() - t0, 1)
         cfg = RefineConfig(iters=args.refine_iters)
-        refined, stats = refine_gaussians(manifest, gaussians, views, cfg)
+        refined, stats = refine_gaussians(manifest, gaussians, views, cfg, progress=not args.quiet)
         write_splats(args.out / "refined.ply", refined)
         # The control: the same refinement on the recorded views alone, so the table shows what
         # the restored views add beyond training the reconstruction longer.
-        control, control_stats = refine_gaussians(manifest, gaussians, [], cfg)
+        control, control_stats = refine_gaussians(manifest, gaussians, [], cfg, progress=not args.quiet)
         metrics["refine"] = {**stats, "step_m": args.step, "frames": sorted({v.frame for v in views}), "offsets_m": list(args.offsets),
                              "restore_seconds": restore_seconds, "control_seconds": control_stats["seconds"]}
         metrics["lateral"] += score_gaussians(manifest, refined, "refined", args.frames)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from . import add_json_option
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
@@ -15,7 +17,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("info", help="count, SH degree and bounds of a 3DGS splat PLY")
     p.add_argument("ply", help="splat PLY file")
     p.add_argument("--drop-invalid", action="store_true", help="ignore splats with NaN/Inf values")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    add_json_option(p, "count, SH degree and bounds")
     p.set_defaults(func=_info)
 
 
@@ -32,11 +34,11 @@ def _validate(args) -> int:
 
 def _info(args) -> int:
     from ..io.ply import describe, read_splats
-    from . import print_json
+    from . import write_json
 
     info = describe(args.ply, read_splats(args.ply, drop_invalid=args.drop_invalid))
     if args.json:
-        print_json(info)
+        write_json(info, args.json)
     else:
         lo, hi = info["bounds_min"], info["bounds_max"]
         print(f"{info['path']}: {info['count']} splats, SH degree {info['sh_degree']}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from . import count_int, positive_int
+from . import add_quiet_option, count_int, positive_int
 
 
 def _common(p, images: bool) -> None:
@@ -26,6 +26,7 @@ def _common(p, images: bool) -> None:
     p.add_argument("--fps", type=float, default=10.0, help="frame rate for timestamps when the source has none")
     p.add_argument("--name", help="scene name (default: the package folder's name)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    add_quiet_option(p)
 
 
 def add_commands(sub) -> None:
@@ -70,7 +71,7 @@ def _options(args, copy_images: bool = False):
 def _finish(src, args, t0, copy_images: bool = False) -> int:
     from ..importers.package import write_package
 
-    info = write_package(src, _options(args, copy_images))
+    info = write_package(src, _options(args, copy_images), progress=not args.quiet)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")

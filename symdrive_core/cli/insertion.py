@@ -3,7 +3,9 @@ insert-eval`` (insertion metrics on the package's held-out placements)."""
 
 from __future__ import annotations
 
-from . import count_int, positive_int
+from pathlib import Path
+
+from . import add_json_option, add_quiet_option, add_renamed_option, count_int, positive_int
 
 
 def add_commands(sub) -> None:
@@ -12,56 +14,57 @@ def add_commands(sub) -> None:
     p = sub.add_parser("insert", help="insert a vehicle actor into the background splats: frames, masks, regions")
     p.add_argument("package", help="scene package directory or manifest.json")
     p.add_argument("--actor", required=True, help="id of the actor to insert")
-    p.add_argument("--background", help="background splat PLY (default: the package's background.splats)")
+    add_renamed_option(p, "--gaussians", "--background", type=Path, metavar="PLY",
+                       help="reconstruction PLY (default: the manifest's background splats)")
     p.add_argument("--out", help="output directory (default: <package output>/insert)")
     p.add_argument("--flip-forward", action="store_true", help="turn the asset half a turn (forward = -X assets)")
     p.add_argument("--from-mesh", action="store_true", help="sample the asset's mesh instead of its splat PLY")
-    p.add_argument("--samples", type=positive_int, default=12000, help="Gaussians sampled from a mesh")
+    p.add_argument("--mesh-gaussians", type=positive_int, metavar="N",
+                   help="with --from-mesh: Gaussians sampled from the mesh (default 12000)")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_insert)
 
     p = sub.add_parser("insert-eval", help="naive / colour transfer / harmonized / fine-tuned insertion metrics")
     p.add_argument("package", help="scene package with ground_truth.insertion")
-    p.add_argument("--background", required=True, help="background splat PLY (the reconstruction)")
+    add_renamed_option(p, "--gaussians", "--background", type=Path, metavar="PLY", required=True,
+                       help="reconstruction PLY")
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
     p.add_argument("--steps", type=positive_int, help="harmonization sampler steps (default 10)")
-    p.add_argument("--harmonize-samples", type=positive_int, help="harmonizations averaged per frame (default 4)")
+    add_renamed_option(p, "--samples", "--harmonize-samples", type=positive_int,
+                       help="harmonizations averaged per frame (default 4)")
     p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
-    p.add_argument("--finetune-steps", type=count_int, default=300,
-                   help="colour/opacity fine-tune steps per vehicle (default 300)")
+    add_renamed_option(p, "--finetune-iters", "--finetune-steps", type=count_int,
+                       help="colour/opacity fine-tune iterations per vehicle (default 300)")
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
     p.add_argument("--assets-out", help="write the fine-tuned assets (splat PLY) here")
-    p.add_argument("--json", help="write the rows and details to this JSON file")
+    add_json_option(p, "the rows and details", optional_file=False)
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_insert_eval)
 
 
 def _insert(args) -> int:
-    from pathlib import Path
-
     from ..insertion.render_actor import insert_actor
     from ..scene import load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     out = Path(args.out) if args.out else manifest.output_dir() / "insert"
-    n = insert_actor(manifest, args.actor, out, background=args.background, flip=args.flip_forward,
-                     from_mesh=args.from_mesh, n_samples=args.samples)
+    mesh = {} if args.mesh_gaussians is None else {"n_samples": args.mesh_gaussians}
+    n = insert_actor(manifest, args.actor, out, background=args.gaussians, flip=args.flip_forward,
+                     from_mesh=args.from_mesh, progress=not args.quiet, **mesh)
     print(f"wrote {n} frame(s) of {args.actor} to {out}")
     return 0
 
 
 def _insert_eval(args) -> int:
-    import json
-    from pathlib import Path
-
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..insertion.features import load_extractor
-    from ..io.atomic import write_text_atomic
     from ..io.ply import read_splats
     from ..optim.finetune import FinetuneConfig
     from ..scene import load_manifest
-    from . import print_json
+    from . import print_json, write_json
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     harmonizer = None
@@ -70,15 +73,16 @@ def _insert_eval(args) -> int:
         from ..insertion.harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
 
         harmonizer = restorer_harmonizer(load_restorer(weights=args.weights), steps=args.steps,
-                                         samples=args.harmonize_samples or DEFAULT_SAMPLES)
-    cfg = InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_steps),
+                                         samples=args.samples or DEFAULT_SAMPLES)
+    finetune = FinetuneConfig() if args.finetune_iters is None else FinetuneConfig(steps=args.finetune_iters)
+    cfg = InsertionConfig(finetune=finetune,
                           assets_out=Path(args.assets_out) if args.assets_out else None)
     details: dict = {}
-    rows = evaluate_insertion(manifest, read_splats(args.background, drop_invalid=True), harmonizer=harmonizer,
-                              config=cfg, details=details,
+    rows = evaluate_insertion(manifest, read_splats(args.gaussians, drop_invalid=True), harmonizer=harmonizer,
+                              config=cfg, details=details, progress=not args.quiet,
                               extractor=load_extractor(args.features_module) if args.features_module else None)
     result = {"insertion": rows, **details}
-    if args.json:
-        write_text_atomic(args.json, json.dumps(result, indent=1) + "\n")
+    if args.json not in (None, "-"):  # the JSON is printed in any case
+        write_json(result, args.json)
     print_json(result)
     return 0

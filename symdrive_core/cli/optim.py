@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import count_int, positive_int
+from . import add_quiet_option, count_int, positive_int
 
 
 def add_commands(sub) -> None:
@@ -23,6 +23,7 @@ def add_commands(sub) -> None:
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats at the result")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_reconstruct)
 
@@ -44,7 +45,7 @@ def _reconstruct(args) -> int:
     if args.out is None and not is_inside(out, manifest.root):  # a link shipped in the package
         raise ManifestError(manifest.path or manifest.root, "'reconstruction' leads out of the package (a link); "
                             "pass --out", "reconstruction")
-    result = reconstruct(manifest, out, cfg, resume=args.resume)
+    result = reconstruct(manifest, out, cfg, resume=args.resume, progress=not args.quiet)
     metrics = result.metrics
     if args.lateral:
         from ..io.atomic import write_text_atomic

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from . import positive_int
+from . import add_frames_option, add_json_option, add_quiet_option, positive_int
 
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
 
@@ -14,7 +14,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
-    p.add_argument("--json", action="store_true", help="print the plan as JSON")
+    add_json_option(p, "the plan")
     add_external_assets_option(p)
     p.set_defaults(func=_plan)
 
@@ -23,7 +23,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--no-refine", action="store_true", help="run without 3DGS refinement")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on tiles (default 4)")
@@ -39,6 +39,7 @@ def add_commands(sub) -> None:
     p.add_argument("--frames-per-task", type=positive_int, default=4, help="frames rendered per Ray task (default 4)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_batch)
 
@@ -47,7 +48,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("demo", help="run the built-in street world end to end and write an illustrated report")
     p.add_argument("--out", default="out/demo", help="output directory (default out/demo)")
     p.add_argument("--quick", action="store_true", help="fewer frames and sampler steps, no refinement (minutes)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=_demo)
 
@@ -56,7 +57,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out", required=True, help="directory for accuracy_time.md/.json and pareto.png")
     p.add_argument("--package", help="scene package with ground truth (default: the built-in street world)")
     p.add_argument("--quick", action="store_true", help="fewer frames, views and placements per setting")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_accuracy_time)
 
@@ -64,12 +65,12 @@ def add_commands(sub) -> None:
 def _plan(args) -> int:
     from ..pipeline.plan import PlanOptions, format_plan, make_plan
     from ..scene import load_manifest
-    from . import print_json
+    from . import write_json
 
     plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
                      PlanOptions(refine=not args.no_refine))
     if args.json:
-        print_json(plan.to_json())
+        write_json(plan.to_json(), args.json)
     else:
         print(format_plan(plan))
     return 0
@@ -95,6 +96,7 @@ def _batch(args) -> int:
 
     reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
                         frames_per_task=args.frames_per_task, device=args.device, force=args.force,
+                        progress=not args.quiet,
                         allow_external=args.allow_external_assets)
     for r in reports:
         ran = [s["name"] for s in r["stages"] if s["ran"]]
@@ -137,13 +139,13 @@ def _add_render_command(sub) -> None:
                                       "as PNGs, a quick preview without a run")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--camera", required=True, help="camera name in the manifest")
-    p.add_argument("--frames", default="0", help="frame index A or inclusive range A:B (default 0)")
+    add_frames_option(p, help="frames to render (default: the first)")
     p.add_argument("--out", required=True, help="output folder; frames go to render/<camera>/<frame>.png")
     p.add_argument("--width", type=positive_int, help="output width (default: the camera's; aspect kept if only "
                                              "--height is given)")
     p.add_argument("--height", type=positive_int, help="output height (default: the camera's)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_render)
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from . import count_int, positive_int
+from . import add_quiet_option, count_int, positive_int
 
 
 def add_commands(sub) -> None:
@@ -27,6 +27,7 @@ def add_commands(sub) -> None:
                    help="views off the recorded path go through the restorer (loads the diffusion model)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
     p.add_argument("--no-video", action="store_true", help="write no episode videos")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_sim)
 
@@ -58,7 +59,7 @@ def _sim(args) -> int:
     except (ValueError, ImportError, AttributeError) as exc:
         raise InputError("--agent", str(exc)) from None
     report = run(args.package, args.agent, args.episodes, args.seed, args.out, cfg,
-                 video=not args.no_video, allow_external_assets=args.allow_external_assets,
+                 video=not args.no_video, allow_external_assets=args.allow_external_assets, progress=not args.quiet,
                  invocation=getattr(args, "invocation", None))
     for e in report["episodes"]:
         s = e["scores"]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from . import positive_int
+from . import add_quiet_option, positive_int
 
 
 def add_commands(sub) -> None:
@@ -23,6 +23,7 @@ def add_commands(sub) -> None:
     p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
     p.add_argument("--lanes", type=positive_int, default=2, help="lanes of a --road road (default 2)")
     p.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit for SUMO in seconds")
+    add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_traffic)
 
@@ -55,7 +56,8 @@ def _traffic(args) -> int:
                          manoeuvres=load_manoeuvres(args.manoeuvre) if args.manoeuvre else [],
                          timeout=args.timeout)
     with tempfile.TemporaryDirectory(prefix="symdrive-traffic-") as tmp:
-        run = simulate(road, [f.timestamp for f in src.frames], assets, opt, Path(tmp), where=str(src.path))
+        run = simulate(road, [f.timestamp for f in src.frames], assets, opt, Path(tmp), where=str(src.path),
+                       progress=not args.quiet)
         manifest, gaps = traffic_manifest(src, road, run, assets, opt, out)
         path = write_package(manifest, Path(tmp))
     print(f"{path}: {len(manifest.actors)} vehicles over {len(manifest.frames)} frames "

@@ -79,10 +79,12 @@ def _check_images(g: Grouped) -> None:
                 check_image(v.image, v.width, v.height, v.source, v.where)
 
 
-def write_package(src: Source, opt: Options) -> dict:
+def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
     """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
     summary (frames, cameras, transform, where the images are, whether the package reads files
-    outside itself)."""
+    outside itself). ``progress`` shows a bar over the images (copying thousands takes a while)."""
+    from tqdm import tqdm
+
     from ..io.atomic import atomic_directory
     from ..io.ply import write_splats
     from ..io.points import write_points
@@ -106,11 +108,13 @@ def write_package(src: Source, opt: Options) -> dict:
     T, record = alignment(ground, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
     name = opt.name or out.resolve().name
     external = False
-    with atomic_directory(out) as tmp:
+    bar = tqdm(total=sum(len(row) for row in g.table), desc="import", unit="image", disable=not progress)
+    with atomic_directory(out) as tmp, bar:
         cams = []
         for cam, row in zip(g.cameras, g.table):
             frames = []
             for fi, v in enumerate(row):
+                bar.update()
                 c2w = apply_camera(T, v.c2w)
                 entry = {"K": v.K.tolist(), "camera_to_world": c2w.tolist(),
                          "world_to_camera": conventions.invert_rigid(c2w).tolist()}

@@ -36,7 +36,7 @@ def insert_actor(manifest: Manifest, actor_id: str, out, *, background=None, fli
         raise InputError(manifest.path or manifest.root, f"actor {actor_id!r} needs a wlh size", "actors.wlh")
     bg_path = background or (manifest.resolve(manifest.background_splats) if manifest.background_splats else None)
     if bg_path is None:
-        raise InputError(manifest.path or manifest.root, "no background splats: pass --background or reconstruct "
+        raise InputError(manifest.path or manifest.root, "no background splats: pass --gaussians or reconstruct "
                          "the package first", "background.splats")
     bg = GaussianTensors.from_gaussians(read_splats(bg_path, drop_invalid=True))
     vehicle = actor_gaussians(manifest, actor, flip=flip, from_mesh=from_mesh, n_samples=n_samples)

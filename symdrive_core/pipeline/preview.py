@@ -14,21 +14,11 @@ from pathlib import Path
 from ..errors import InputError
 
 
-def parse_frames(text: str, n_frames: int, where: str = "--frames") -> list[int]:
-    """``A`` or ``A:B`` (inclusive, package frame indices) -> the frame list, checked against ``n_frames``."""
-    parts = str(text).split(":")
-    try:
-        if len(parts) == 1:
-            a = b = int(parts[0])
-        elif len(parts) == 2:
-            a, b = int(parts[0]), int(parts[1])
-        else:
-            raise ValueError
-    except ValueError:
-        raise InputError(where, f"expected A or A:B (frame indices), got {text!r}") from None
-    if a < 0 or b < a or b >= n_frames:
-        raise InputError(where, f"frames {text!r} not within 0:{n_frames - 1}")
-    return list(range(a, b + 1))
+def check_frames(frames: list[int], n_frames: int, where: str = "--frames") -> None:
+    """Every index in ``frames`` is a frame of the package (0 to ``n_frames - 1``)."""
+    bad = [f for f in frames if not 0 <= f < n_frames]
+    if bad:
+        raise InputError(where, f"frame {bad[0]} is not within 0:{n_frames - 1}")
 
 
 def preview_size(width: int, height: int, out_width: int | None = None,
@@ -81,9 +71,9 @@ def render_images(manifest, camera: str, frames: list[int], *, width: int | None
         yield fi, renderer.render(camera, fi).rgb
 
 
-def render_package(package, camera: str, frames: str, out, *, width: int | None = None, height: int | None = None,
+def render_package(package, camera: str, frames: list[int] | None, out, *, width: int | None = None, height: int | None = None,
                    device: str = "cpu", allow_external: bool = False, progress: bool = False) -> list[Path]:
-    """``symdrive render``: write the frames as PNGs under ``out``; returns their paths."""
+    """``symdrive render``: write ``frames`` (None: the first) as PNGs under ``out``; returns their paths."""
     from tqdm import tqdm
 
     from ..io.images import write_image
@@ -92,7 +82,8 @@ def render_package(package, camera: str, frames: str, out, *, width: int | None 
 
     manifest = load_manifest(package, allow_external=allow_external)
     m = preview_manifest(manifest, camera, width, height)  # the camera checked before any asset is read
-    frame_list = parse_frames(frames, len(m.cameras[0].frames))
+    frame_list = [0] if frames is None else list(frames)
+    check_frames(frame_list, len(m.cameras[0].frames))
     check_files(manifest)
     tree = OutputTree(Path(out))
     written = []

@@ -90,8 +90,11 @@ def summarize(episodes: list[dict]) -> dict:
 
 
 def run(package, agent: str, episodes: int, seed: int, out: str | Path, config: SimConfig | None = None, *,
-        video: bool = True, allow_external_assets: bool = False, invocation: str | None = None) -> dict:
+        video: bool = True, allow_external_assets: bool = False, invocation: str | None = None,
+        progress: bool = True) -> dict:
     """``symdrive sim``: every episode, then ``out/report.json``; returns the report."""
+    from tqdm import tqdm
+
     from .agents import load_agent
     from .env import SymDriveEnv
 
@@ -102,7 +105,7 @@ def run(package, agent: str, episodes: int, seed: int, out: str | Path, config: 
     env = SymDriveEnv(package, config, allow_external_assets=allow_external_assets)
     records = []
     try:
-        for i in range(episodes):
+        for i in tqdm(range(episodes), desc="sim", unit="episode", disable=not progress):
             path = out / f"episode_{i:03d}.mp4" if video else None
             rec = run_episode(env, agent_cls, seed + i, video=path)
             records.append({"episode": i, **rec})

@@ -70,8 +70,9 @@ def check_inputs(road: Road, frame_times: np.ndarray, assets: list[Asset], opt: 
 
 
 def simulate(road: Road, frame_times: np.ndarray, assets: list[Asset], opt: TrafficOptions,
-             workdir: Path, where: str = "traffic") -> TrafficRun:
-    """Run SUMO in ``workdir`` (network, routes and FCD are left there)."""
+             workdir: Path, where: str = "traffic", progress: bool = True) -> TrafficRun:
+    """Run SUMO in ``workdir`` (network, routes and FCD are left there). ``progress``: a bar over
+    simulated seconds when manoeuvres step SUMO through TraCI (a plain run is one SUMO call)."""
     frame_times = np.asarray(frame_times, dtype=np.float64)
     check_inputs(road, frame_times, assets, opt, where)
     net = build_network(road, opt.speed, workdir)
@@ -89,11 +90,15 @@ def simulate(road: Road, frame_times: np.ndarray, assets: list[Asset], opt: Traf
     t0 = time.perf_counter()
     log: list[dict] = []
     if opt.manoeuvres:
+        from tqdm import tqdm
+
         director = Director(opt.manoeuvres, time_offset, net.offset, road.lane_width)
-        with traci_session(args, opt.timeout, workdir) as conn:
+        bar = tqdm(total=round(end / STEP_S), desc="traffic", unit="step", disable=not progress)
+        with traci_session(args, opt.timeout, workdir) as conn, bar:
             while conn.simulation.getTime() < end - 0.5 * STEP_S:
                 conn.simulationStep()
                 director.step(conn, conn.simulation.getTime())
+                bar.update()
         log = director.report()
     else:
         run_tool("sumo", args, opt.timeout, workdir)

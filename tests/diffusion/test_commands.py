@@ -38,7 +38,7 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
                 str(pairs),
                 "--out",
                 str(tmp_path / "run"),
-                "--steps",
+                "--iters",
                 "3",
                 "--width",
                 "8",
@@ -155,7 +155,7 @@ def test_restore_rejects_frames_the_camera_does_not_have(synthetic_package, tmp_
     ply = tmp_path / "recon.ply"
     write_splats(ply, truth)
     out = tmp_path / "o"
-    for flags in (["--frames", "6"], ["--evaluate", "--refine", "--refine-frames", "0,-1"]):
+    for flags in (["--frames", "6"], ["--evaluate", "--refine", "--refine-frames", "0,9"]):
         assert main(["restore", str(root), "--gaussians", str(ply), "--out", str(out), *flags]) == 2
         assert f"{flags[-2]} {flags[-1].split(',')[-1]} is not a frame of camera 'front'" in capsys.readouterr().err
     assert not out.exists()

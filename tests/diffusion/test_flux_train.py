@@ -79,7 +79,7 @@ def test_command_trains_a_lora_that_backend_flux_loads_and_restores_with(files, 
     argv = [
         "train-restorer", str(files / "pairs.safetensors"), "--out", str(out), "--backend", "flux",
         "--flux-transformer", str(files / "transformer"), "--flux-vae", str(files / "vae"),
-        "--prompt", str(files / "prompt.safetensors"), "--steps", "6", "--rank", "4", "--crop", "16",
+        "--prompt", str(files / "prompt.safetensors"), "--iters", "6", "--rank", "4", "--crop", "16",
         "--lr", "1e-2", "--warmup", "1", "--threads", "1", "--checkpoint-every", "3",
     ]  # fmt: skip
     assert main(argv) == 0

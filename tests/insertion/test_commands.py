@@ -20,7 +20,7 @@ def _parse(argv):
 def test_insert_writes_frames_masks_and_regions(tmp_path):
     path, _ = package.write_package(tmp_path / "pkg")
     out = tmp_path / "out"
-    args = _parse(["insert", str(path), "--actor", "insert_0", "--background", str(path.parent / "background.ply"),
+    args = _parse(["insert", str(path), "--actor", "insert_0", "--gaussians", str(path.parent / "background.ply"),
                    "--out", str(out)])
     assert args.func(args) == 0
     frame = out / "front" / f"{package.HELD:06d}"
@@ -38,7 +38,7 @@ def test_insert_writes_frames_masks_and_regions(tmp_path):
 def test_insert_under_a_sun_writes_the_cast_shadow(tmp_path):
     path, _ = package.write_package(tmp_path / "pkg", sun=package.SUN)
     out = tmp_path / "out"
-    args = _parse(["insert", str(path), "--actor", "insert_0", "--background", str(path.parent / "background.ply"),
+    args = _parse(["insert", str(path), "--actor", "insert_0", "--gaussians", str(path.parent / "background.ply"),
                    "--out", str(out)])
     assert args.func(args) == 0
     frame = out / "front" / f"{package.HELD:06d}"
@@ -52,7 +52,7 @@ def test_insert_under_a_sun_writes_the_cast_shadow(tmp_path):
 
 def test_insert_eval_baselines_to_json(tmp_path, capsys):
     path, _ = package.write_package(tmp_path / "pkg")
-    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"), "--no-harmonize",
+    args = _parse(["insert-eval", str(path), "--gaussians", str(path.parent / "background.ply"), "--no-harmonize",
                    "--json", str(tmp_path / "rows.json")])
     assert args.func(args) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
@@ -68,15 +68,15 @@ def test_insert_eval_harmonizes_with_the_weights_given(tmp_path):
     path, _ = package.write_package(tmp_path / "pkg")
     torch.manual_seed(0)
     weights = save_builtin(tmp_path / "tiny.safetensors", UNet(UNetConfig(width=8, mults=(1, 2))))
-    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"),
-                   "--weights", str(weights), "--steps", "2", "--harmonize-samples", "2", "--finetune-steps", "2",
+    args = _parse(["insert-eval", str(path), "--gaussians", str(path.parent / "background.ply"),
+                   "--weights", str(weights), "--steps", "2", "--samples", "2", "--finetune-iters", "2",
                    "--json", str(tmp_path / "rows.json")])
     assert args.func(args) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
     assert [r["method"] for r in rows] == ["naive", "color_transfer", "harmonized", "finetuned"]
     assert all(np.isfinite(r["masked_psnr"]) for r in rows)
     # a missing weights file is named, not replaced by the shipped one
-    args = _parse(["insert-eval", str(path), "--background", str(path.parent / "background.ply"),
+    args = _parse(["insert-eval", str(path), "--gaussians", str(path.parent / "background.ply"),
                    "--weights", str(tmp_path / "absent.safetensors")])
     with pytest.raises(InputError, match="absent.safetensors"):
         args.func(args)

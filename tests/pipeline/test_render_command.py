@@ -9,7 +9,7 @@ from symdrive_core.cli import main
 from symdrive_core.errors import InputError
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import write_splats
-from symdrive_core.pipeline.preview import parse_frames, render_images
+from symdrive_core.pipeline.preview import check_frames, render_images
 from symdrive_core.scene import load_manifest
 from tests.conftest import random_gaussians
 
@@ -17,9 +17,9 @@ from tests.conftest import random_gaussians
 def test_render_writes_the_frames_inside_out(make_package, tmp_path):
     path = make_package(n_frames=3)
     out = tmp_path / "out"
-    assert main(["render", str(path), "--camera", "front", "--frames", "1:2", "--out", str(out), "--quiet"]) == 0
+    assert main(["render", str(path), "--camera", "front", "--frames", "2,0:1", "--out", str(out), "--quiet"]) == 0
     pngs = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.png"))
-    assert pngs == ["render/front/000001.png", "render/front/000002.png"]
+    assert pngs == ["render/front/000000.png", "render/front/000001.png", "render/front/000002.png"]
     assert all(p.resolve().is_relative_to(out.resolve()) for p in out.rglob("*"))
     img = read_image(out / pngs[0])
     assert img.shape == (24, 32, 3) and img.max() > 0
@@ -49,8 +49,8 @@ def test_bad_camera_or_frames_exit_2_and_write_nothing(make_package, tmp_path, c
     assert not out.exists()
 
 
-def test_parse_frames():
-    assert parse_frames("3", 5) == [3] and parse_frames("1:3", 5) == [1, 2, 3]
-    for bad in ("x", "1:2:3", "4:1", "5", "-1"):
-        with pytest.raises(InputError):
-            parse_frames(bad, 5)
+def test_check_frames():
+    check_frames([0, 4], 5)
+    for bad in ([5], [0, 7]):
+        with pytest.raises(InputError, match=f"frame {bad[-1]} is not within 0:4"):
+            check_frames(bad, 5)
