@@ -133,6 +133,9 @@ def print_json(obj) -> None:
     print(json.dumps(obj, indent=1))
 
 
+FRAMES_MAX = 1_000_000
+
+
 def frames_arg(text: str) -> list[int]:
     """``--frames`` of every command: ``0:3,7,10:12``, single indices and inclusive ranges ``A:B``.
 
@@ -153,6 +156,8 @@ def frames_arg(text: str) -> list[int]:
         a, b = int(ends[0]), int(ends[-1])
         if b < a:
             raise argparse.ArgumentTypeError(f"range {item!r} runs backwards (expected A:B with A <= B)")
+        if b - a + 1 + len(frames) > FRAMES_MAX:  # a typo like 0:999999999 fails here, not out of memory
+            raise argparse.ArgumentTypeError(f"{text!r} names more than {FRAMES_MAX:,} frames")
         frames.update(dict.fromkeys(range(a, b + 1)))
     return list(frames)
 

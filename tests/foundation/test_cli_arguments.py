@@ -252,3 +252,9 @@ def test_counts_below_their_minimum_exit_2_naming_the_option(capsys, argv):
     err = capsys.readouterr().err
     option = argv[-2]  # the offending option is the last one given
     assert exc.value.code == 2 and f"symdrive {argv[0]}: error: argument {option}" in err and "at least" in err
+
+
+def test_a_huge_frame_range_is_refused_when_parsed(capsys):
+    assert _exit_code(["render", PKG, "--camera", "front", "--frames", "0:999999999", "--out", "OUT"]) == 2
+    err = capsys.readouterr().err
+    assert "symdrive render: error: argument --frames" in err and "more than" in err
