@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
+from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_quiet_option, add_renamed_option, count_int, device_arg, positive_int
 
 
@@ -139,7 +140,8 @@ def add_commands(sub) -> None:
         help="metres; each is restored on both sides (with --evaluate, the views --refine trains on; "
              "scoring covers every offset with ground truth)",
     )
-    p.add_argument("--step", type=float, default=0.5, help="chain step d in metres (0 = single-view)")
+    p.add_argument("--step", type=float, default=StageOptions.ar_step,
+                   help=f"chain step d in metres (0 = single-view; default {StageOptions.ar_step:g})")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=positive_int, help="sampler steps (default: 5 builtin, 50 flux)")
     p.add_argument("--n-start", type=count_int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
@@ -147,8 +149,9 @@ def add_commands(sub) -> None:
     p.add_argument("--samples", type=positive_int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         "times the work (default: 8 builtin, 1 flux)")
-    p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
-                   help="memory for one restorer evaluation; larger images run on overlapping tiles (default 4)")
+    p.add_argument("--max-memory", type=float, default=StageOptions.max_memory_gib, metavar="GiB",
+                   help="memory for one restorer evaluation; larger images run on overlapping tiles "
+                        f"(default {StageOptions.max_memory_gib:g})")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder: restored views and restored.json, or metrics.json with --evaluate")
     p.add_argument(
@@ -161,7 +164,8 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=positive_int, default=900, help="refinement iterations of --refine (default 900)")
+    p.add_argument("--refine-iters", type=positive_int, default=StageOptions.refine_iters,
+                   help=f"refinement iterations of --refine (default {StageOptions.refine_iters})")
     add_frames_option(p, "--refine-frames",
                       help="recorded frames whose restored lateral views --refine trains on (default: all)")
     p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",

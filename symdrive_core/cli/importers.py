@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
 from . import add_quiet_option, count_int, positive_int
 
 
@@ -22,8 +23,10 @@ def _common(p, images: bool) -> None:
                    help="hold every N-th frame out of training for evaluation (N=5: frames 2, 7, 12, ...)")
     p.add_argument("--copy-images", action="store_true",
                    help="copy the images into the package (default: reference them, relative to the package)")
-    p.add_argument("--camera-name", default="front", help="name of the package camera when there is one (front)")
-    p.add_argument("--fps", type=float, default=10.0, help="frame rate for timestamps when the source has none")
+    p.add_argument("--camera-name", default=DEFAULT_CAMERA,
+                   help=f"name of the package camera when there is one ({DEFAULT_CAMERA})")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS,
+                   help=f"frame rate for timestamps when the source has none ({DEFAULT_FPS:g})")
     p.add_argument("--name", help="scene name (default: the package folder's name)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     add_quiet_option(p)

@@ -26,7 +26,8 @@ def add_commands(sub) -> None:
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
-                   help="memory for one restorer evaluation; larger images run on tiles (default 4)")
+                   help="memory for one restorer evaluation; larger images run on tiles "
+                        f"(default {StageOptions.max_memory_gib:g})")
     add_external_assets_option(p)
     p.set_defaults(func=_run)
 

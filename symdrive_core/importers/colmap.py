@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
 from .package import Source
 
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -89,7 +89,7 @@ def camera_K(cam, where: str, source: Path) -> np.ndarray:
 
 
 def read_colmap(model_dir: str | Path, images: str | Path | None, *, splats: str | Path | None = None,
-                camera_name: str = "front", fps: float = 10.0) -> Source:
+                camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> Source:
     model_dir = Path(model_dir)
     rec = read_model(model_dir)
     cam_file, img_file = model_file(model_dir, "cameras"), model_file(model_dir, "images")

@@ -23,6 +23,9 @@ import numpy as np
 from ..errors import InputError
 from ..scene.paths import check_name
 
+DEFAULT_CAMERA = "front"  # the package camera's name when the source has one camera
+DEFAULT_FPS = 10.0  # frame rate for timestamps when the source has none
+
 
 @dataclass
 class View:
@@ -78,7 +81,7 @@ def _folder_layout(views: list[View]) -> bool:
     return all(len(p) >= 2 for p in parts) and len({p[0] for p in parts}) >= 2
 
 
-def group_views(views: list[View], *, camera_name: str = "front", fps: float = 10.0) -> Grouped:
+def group_views(views: list[View], *, camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> Grouped:
     check_views(views)
     by_cam: dict[str, dict[str, View]] = {}
     if _folder_layout(views):

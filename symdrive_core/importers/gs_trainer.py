@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
 from .package import Source
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".exr", ".tif", ".tiff")
@@ -124,7 +124,7 @@ def read_views(model: str | Path, images: str | Path | None) -> list[View]:
 
 
 def read_gs_output(model: str | Path, images: str | Path | None, *, iteration: int | None = None,
-                   splats: str | Path | None = None, camera_name: str = "front", fps: float = 10.0) -> Source:
+                   splats: str | Path | None = None, camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> Source:
     model = Path(model)
     views = read_views(model, images)
     ply = Path(splats) if splats is not None else newest_iteration(model, iteration)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
 from .package import Source
 
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -118,8 +118,8 @@ def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[Vie
     return path, data, A, views
 
 
-def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None, camera_name: str = "front",
-                    fps: float = 10.0) -> Source:
+def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None, camera_name: str = DEFAULT_CAMERA,
+                    fps: float = DEFAULT_FPS) -> Source:
     path, data, A, views = read_views(transforms)
     base = path.parent
     points = colors = None
