@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_json_option, add_quiet_option, positive_int
 
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
