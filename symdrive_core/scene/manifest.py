@@ -407,21 +407,7 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
             frame(e["frame"], f"ground_truth.insertion[{ii}].frame")
 
 
-def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Manifest:
-    """A :class:`Manifest` from parsed JSON, every field checked (``path``: the file it came
-    from, whose folder is the package root; ``allow_external``: asset paths may lead outside it)."""
-    rd = _Reader(path)
-    _check_depth(rd, data)  # before the schema, whose validator recurses
-    for where, message in (schema_problems(data) or [])[:1]:
-        rd.fail(where, message)
-    d = rd.obj(data, "(root)")
-    if d.get("format", FORMAT) != FORMAT:
-        rd.fail("format", f"expected {FORMAT!r}, got {d.get('format')!r}")
-    version = rd.integer(rd.key(d, "version", ""), "version")
-    if version != VERSION:
-        rd.fail("version", f"this reader understands version {VERSION}, got {version}")
-    name = rd.name(rd.key(d, "name", ""), "name")
-
+def _frames(rd: _Reader, d: dict) -> list[Frame]:
     frames = []
     for i, f in enumerate(rd.lst(rd.key(d, "frames", ""), "frames")):
         w = f"frames[{i}]"
@@ -435,8 +421,10 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
     for i in range(1, len(frames)):
         if frames[i].timestamp <= frames[i - 1].timestamp:
             rd.fail(f"frames[{i}].timestamp", "timestamps must increase")
-    nf = len(frames)
+    return frames
 
+
+def _cameras(rd: _Reader, d: dict, nf: int) -> list[Camera]:
     cameras = []
     for ci, c in enumerate(rd.lst(rd.key(d, "cameras", ""), "cameras")):
         w = f"cameras[{ci}]"
@@ -480,8 +468,10 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
         cameras.append(Camera(cname, width, height, camera_frames))
     if not cameras:
         rd.fail("cameras", "expected at least one camera")
+    return cameras
 
-    bg = rd.obj(d.get("background", {}), "background")
+
+def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
     actors = []
     for ai, a in enumerate(rd.lst(d.get("actors", []), "actors")):
         w = f"actors[{ai}]"
@@ -526,9 +516,10 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
         if any(x.instance_id == iid for x in actors):
             rd.fail(f"{w}.instance_id", f"duplicate instance id {iid}")
         actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid))
+    return actors
 
-    cam_names = {c.name for c in cameras}
-    actor_ids = {a.id for a in actors}
+
+def _masks(rd: _Reader, d: dict, cam_names: set, actor_ids: set, nf: int) -> tuple[list[MaskEntry], list[IdMap]]:
     masks_obj = rd.obj(d.get("masks", {}), "masks")
     masks = []
     for mi, m in enumerate(rd.lst(masks_obj.get("entries", []), "masks.entries")):
@@ -564,7 +555,10 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
                 rd.fail(f"{w}.ids.{k}", f"no actor with id {v!r}")
             ids[int(k)] = v
         id_maps.append(IdMap(cam, fr, rd.ref(rd.key(m, "path", w), f"{w}.path", allow_none=False), ids))
+    return masks, id_maps
 
+
+def _effects(rd: _Reader, d: dict) -> Effects:
     e = rd.obj(d.get("effects", {}), "effects")
     offsets = [rd.num(v, f"effects.lateral_offsets[{i}]", OFFSET_MAX)
                for i, v in enumerate(rd.lst(e.get("lateral_offsets", []), "effects.lateral_offsets"))]
@@ -580,11 +574,12 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
         ratio = rd.num(e["shadow_ratio"], "effects.shadow_ratio")
         if not 0.0 <= ratio <= 1.0:
             rd.fail("effects.shadow_ratio", f"must lie in [0, 1] (fraction of light kept in shadow), got {ratio}")
-    effects = Effects(offsets, rd.boolean(e.get("harmonize", False), "effects.harmonize"),
+    return Effects(offsets, rd.boolean(e.get("harmonize", False), "effects.harmonize"),
                       rd.boolean(e.get("finetune", False), "effects.finetune"),
                       rd.boolean(e.get("shadows", False), "effects.shadows"), sun, ratio)
-    gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
-    _check_ground_truth_refs(rd, gt, cam_names, nf)
+
+
+def _source(rd: _Reader, d: dict) -> dict:
     source = rd.obj(d.get("source", {}), "source")
     if "transform" in source:
         T = rd.matrix(source["transform"], 4, 4, "source.transform")
@@ -592,12 +587,40 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
         if not np.allclose(T[3], [0, 0, 0, 1]) or det <= 0 or not _rigid_ok(
                 np.vstack([np.hstack([T[:3, :3] / np.cbrt(det), T[:3, 3:]]), [0, 0, 0, 1]])):
             rd.fail("source.transform", "not a similarity (scaled rotation, positive scale, last row 0 0 0 1)")
+    return source
+
+
+def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Manifest:
+    """A :class:`Manifest` from parsed JSON: the schema first (every key, type and range), then per
+    section what a schema cannot say (``path``: the file it came from, whose folder is the package
+    root; ``allow_external``: asset paths may lead outside it)."""
+    rd = _Reader(path)
+    _check_depth(rd, data)  # before the schema, whose validator recurses
+    for where, message in (schema_problems(data) or [])[:1]:
+        rd.fail(where, message)
+    d = rd.obj(data, "(root)")
+    if d.get("format", FORMAT) != FORMAT:
+        rd.fail("format", f"expected {FORMAT!r}, got {d.get('format')!r}")
+    version = rd.integer(rd.key(d, "version", ""), "version")
+    if version != VERSION:
+        rd.fail("version", f"this reader understands version {VERSION}, got {version}")
+    name = rd.name(rd.key(d, "name", ""), "name")
+    frames = _frames(rd, d)
+    nf = len(frames)
+    cameras = _cameras(rd, d, nf)
+    actors = _actors(rd, d, nf)
+    cam_names = {c.name for c in cameras}
+    masks, id_maps = _masks(rd, d, cam_names, {a.id for a in actors}, nf)
+    effects = _effects(rd, d)
+    gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
+    _check_ground_truth_refs(rd, gt, cam_names, nf)
+    bg = rd.obj(d.get("background", {}), "background")
     return Manifest(
         name=name, frames=frames, cameras=cameras, actors=actors,
         background_splats=rd.ref(bg.get("splats"), "background.splats"),
         background_points=rd.ref(bg.get("points"), "background.points"),
         masks=masks, id_maps=id_maps, effects=effects,
-        output=rd.output(d.get("output", "output")), ground_truth=gt, source=source,
+        output=rd.output(d.get("output", "output")), ground_truth=gt, source=_source(rd, d),
         root=path.parent, path=path, allow_external=allow_external)
 
 
