@@ -177,3 +177,8 @@ def linear_to_srgb(x) -> np.ndarray:
     """Linear light in [0, 1] (clipped) to sRGB-encoded values."""
     x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def to_uint8(image: np.ndarray) -> np.ndarray:
+    """[0, 1] floats to 8-bit, rounded to nearest (how training pairs and images are stored)."""
+    return np.clip(np.rint(np.asarray(image, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)

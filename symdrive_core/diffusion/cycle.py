@@ -20,7 +20,7 @@ from ..gaussians import Gaussians
 from ..optim.densify import DensifyConfig
 from ..optim.reconstruct import ReconstructConfig, View, fit, initial_gaussians, load_views
 from ..scene import Manifest
-from .data import SplatRenderer, to_uint8
+from ..splat.render import SplatRenderer
 from .defaults import CYCLE_DEFAULTS
 
 
@@ -61,4 +61,4 @@ def cycle_renders(
     initial = initial_gaussians(manifest, recorded, cfg)
     fitted, _ = fit(shifted, initial, cfg, progress=progress, desc=f"cycle {offset_m:+g} m")
     back = SplatRenderer(fitted)
-    return np.stack([to_uint8(back(v.K.numpy(), v.viewmat.numpy(), v.width, v.height)) for v in recorded])
+    return np.stack([conventions.to_uint8(back(v.K.numpy(), v.viewmat.numpy(), v.width, v.height)) for v in recorded])

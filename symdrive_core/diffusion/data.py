@@ -34,39 +34,7 @@ from ..gaussians import Gaussians
 from ..io.atomic import atomic_path
 from ..io.images import read_image
 from ..scene import Manifest
-
-
-class SplatRenderer:
-    """Renders one set of Gaussians at arbitrary cameras ([H, W, 3] float32 in [0, 1])."""
-
-    def __init__(self, gaussians: Gaussians):
-        from ..optim.reconstruct import params_from_gaussians
-
-        self.degree = gaussians.sh_degree
-        self.params = params_from_gaussians(gaussians, self.degree)
-
-    @torch.no_grad()
-    def __call__(self, K, world_to_camera, width: int, height: int) -> np.ndarray:
-        from ..optim.reconstruct import render
-
-        rgb, _, _ = render(
-            self.params,
-            torch.tensor(K, dtype=torch.float32),
-            torch.tensor(world_to_camera, dtype=torch.float32),
-            width,
-            height,
-            self.degree,
-        )
-        return rgb.clamp(0, 1).numpy()
-
-    def shifted(self, K, camera_to_world, offset_m: float, width: int, height: int) -> np.ndarray:
-        """The render at the camera moved ``offset_m`` along its own +x (right)."""
-        c2w = conventions.lateral_shift(camera_to_world, offset_m)
-        return self(K, conventions.invert_rigid(c2w), width, height)
-
-
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(np.asarray(image, dtype=np.float32) * 255.0), 0, 255).astype(np.uint8)
+from ..splat.render import SplatRenderer
 
 
 def make_pairs(
@@ -108,10 +76,10 @@ def make_pairs(
                 "frame has no recorded image",
                 f"cameras.{cam.name}.frames[{i}].image",
             )
-        gt = to_uint8(read_image(manifest.resolve(cf.image), channels=3))
+        gt = conventions.to_uint8(read_image(manifest.resolve(cf.image), channels=3))
         for d in offsets:
-            left.append(to_uint8(render.shifted(cf.K, cf.camera_to_world, -d, cam.width, cam.height)))
-            right.append(to_uint8(render.shifted(cf.K, cf.camera_to_world, d, cam.width, cam.height)))
+            left.append(conventions.to_uint8(render.shifted(cf.K, cf.camera_to_world, -d, cam.width, cam.height)))
+            right.append(conventions.to_uint8(render.shifted(cf.K, cf.camera_to_world, d, cam.width, cam.height)))
             target.append(gt)
             offs.append(d)
             idx.append(i)

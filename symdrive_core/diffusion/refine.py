@@ -50,10 +50,9 @@ def refine_gaussians(
         gaussians_from_params,
         load_views,
         make_optimizer,
-        params_from_gaussians,
-        render,
         scene_extent,
     )
+    from ..splat.render import params_from_gaussians, render_params
     from ..world.package import split_frames
 
     cfg = cfg or RefineConfig()
@@ -80,7 +79,7 @@ def refine_gaussians(
     t0 = time.perf_counter()
     for _ in tqdm(range(cfg.iters), desc="refine", unit="it", disable=not progress):
         gv = gt_views[rng_recorded.integers(len(gt_views))]
-        rgb, alpha, info = render(
+        rgb, alpha, info = render_params(
             params,
             gv.K,
             gv.viewmat,
@@ -96,7 +95,7 @@ def refine_gaussians(
                 loss = loss + cfg.depth_weight * dl
         if novel:
             K, viewmat, image, w, h = novel[rng_restored.integers(len(novel))]
-            rgb, _, _ = render(params, K, viewmat, w, h, gaussians.sh_degree)
+            rgb, _, _ = render_params(params, K, viewmat, w, h, gaussians.sh_degree)
             loss = loss + cfg.novel_weight * photometric(rgb, image, cfg.ssim_lambda)
         opt.zero_grad(set_to_none=True)
         loss.backward()

@@ -24,7 +24,7 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
-from .data import SplatRenderer
+from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
 
 

@@ -15,8 +15,8 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
+from ..splat.render import render_gaussians
 from ..world.package import lateral_views, split_frames
-from .reconstruct import render_gaussians
 
 
 def _score(pred: np.ndarray, target: np.ndarray) -> tuple[float, float]:

@@ -20,12 +20,13 @@ import numpy as np
 import torch
 
 from ..errors import InputError
-from ..gaussians import Gaussians, rgb_to_sh_dc, sh_coeff_count
+from ..gaussians import Gaussians, rgb_to_sh_dc
 from ..io.atomic import atomic_path, write_text_atomic
 from ..io.images import read_image
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
+from ..splat.render import params_from_gaussians, render_params
 from ..world.package import split_frames
 from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
 from .losses import photometric
@@ -91,18 +92,6 @@ def load_views(manifest: Manifest, frames: list[int], camera: str | None = None,
 # ------------------------------------------------------------------ parameters
 
 
-def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Parameter]:
-    k = sh_coeff_count(sh_degree)
-    sh = np.zeros((len(g), k, 3), np.float32)
-    m = min(k, g.sh.shape[1])
-    sh[:, :m] = g.sh[:, :m]
-    p = {"means": g.means, "quats": g.quats, "log_scales": g.log_scales,
-         "opacity_logits": g.opacity_logits, "sh0": sh[:, :1]}
-    if k > 1:
-        p["shN"] = sh[:, 1:]
-    return {n: torch.nn.Parameter(torch.tensor(np.ascontiguousarray(v), dtype=torch.float32)) for n, v in p.items()}
-
-
 def gaussians_from_params(params: dict[str, torch.Tensor]) -> Gaussians:
     sh = params["sh0"]
     if "shN" in params:
@@ -110,29 +99,6 @@ def gaussians_from_params(params: dict[str, torch.Tensor]) -> Gaussians:
     t = {n: v.detach().cpu().numpy() for n, v in params.items()}
     return Gaussians(means=t["means"], quats=t["quats"], log_scales=t["log_scales"],
                      opacity_logits=t["opacity_logits"], sh=sh.detach().cpu().numpy())
-
-
-def render(params: dict[str, torch.Tensor], view_K, viewmat, width: int, height: int,
-           sh_degree: int, render_depth: bool = False, **raster_options):
-    """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info).
-    ``raster_options`` go to :func:`symdrive_core.splat.rasterize` (antialiased, extent, ...)."""
-    from ..splat import rasterize
-
-    sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
-        [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
-    quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
-    return rasterize(params["means"], quats, params["log_scales"].exp(),
-                     torch.sigmoid(params["opacity_logits"]), sh, viewmat, view_K, width, height,
-                     sh_degree=sh_degree, render_depth=render_depth, **raster_options)
-
-
-def render_gaussians(g: Gaussians, K, world_to_camera, width: int, height: int) -> np.ndarray:
-    """Render stored Gaussians at one camera; sRGB-like [H,W,3] numpy in [0, 1]."""
-    params = params_from_gaussians(g, g.sh_degree)
-    with torch.no_grad():
-        rgb, _, _ = render(params, torch.tensor(K, dtype=torch.float32),
-                           torch.tensor(world_to_camera, dtype=torch.float32), width, height, g.sh_degree)
-    return rgb.clamp(0, 1).numpy()
 
 
 # ------------------------------------------------------------------ initialisation
@@ -310,7 +276,7 @@ def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *,
             if group["name"] == "means":
                 group["lr"] = position_lr(cfg, extent, it)
         degree = min(cfg.sh_degree, it // cfg.sh_every)
-        rgb, alpha, info = render(params, view.K, view.viewmat, view.width, view.height, degree,
+        rgb, alpha, info = render_params(params, view.K, view.viewmat, view.width, view.height, degree,
                                   render_depth=cfg.depth_weight > 0)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if cfg.depth_weight > 0:

@@ -135,13 +135,13 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True, force:
 def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool, force: bool) -> dict:
     import time
 
-    from ..diffusion.data import SplatRenderer
     from ..insertion.assets import load_vehicle_asset
     from ..insertion.placements import held_out_placements
     from ..io.atomic import write_text_atomic
     from ..io.images import read_image
     from ..io.ply import read_splats
     from ..scene import load_manifest
+    from ..splat.render import SplatRenderer
     from ..splat.tensors import GaussianTensors
     from ..world.package import lateral_views
     from .report import write_report_json

@@ -54,7 +54,7 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     """Each rasterizer option against Cycles on held-out frames (render time per frame)."""
     from ..conventions import scale_intrinsics
     from ..io.images import read_image
-    from ..optim.reconstruct import params_from_gaussians, render
+    from ..splat.render import params_from_gaussians, render_params
     from ..world.package import split_frames
 
     cam = manifest.cameras[0]
@@ -71,7 +71,7 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
             cf = cam.frames[fi]
             w, h = round(cam.width * scale), round(cam.height * scale)
             K = torch.tensor(scale_intrinsics(cf.K, w / cam.width, h / cam.height), dtype=dtype)
-            rgb = render(p, K, torch.tensor(cf.world_to_camera, dtype=dtype), w, h, degree, **raster)[0]
+            rgb = render_params(p, K, torch.tensor(cf.world_to_camera, dtype=dtype), w, h, degree, **raster)[0]
             if (w, h) != (cam.width, cam.height):  # what a user gets by upsampling a cheap render
                 rgb = torch.nn.functional.interpolate(rgb.permute(2, 0, 1)[None], size=(cam.height, cam.width),
                                                       mode="bilinear", align_corners=False)[0].permute(1, 2, 0)

@@ -148,7 +148,6 @@ def restore_stage(ctx) -> StageResult:
     with lateral ground truth, also score raw 3DGS and the ablations on those views."""
     from tqdm import tqdm
 
-    from ..diffusion.data import SplatRenderer
     from ..diffusion.restore import (
         LateralChain,
         RestoredView,
@@ -157,6 +156,7 @@ def restore_stage(ctx) -> StageResult:
         score_gaussians,
     )
     from ..io.images import read_image, write_image
+    from ..splat.render import SplatRenderer
     from ..world.package import with_lateral_offsets
 
     m, opts = ctx.manifest, ctx.options

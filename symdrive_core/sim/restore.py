@@ -37,9 +37,9 @@ class OnlineRestorer:
         self.samples = 0
 
     def _load(self) -> None:
-        from ..diffusion.data import SplatRenderer
         from ..diffusion.models import load_restorer
         from ..io.ply import read_splats
+        from ..splat.render import SplatRenderer
 
         m = self.env.manifest
         if not m.background_splats:

@@ -53,14 +53,15 @@ def _depth_error(manifest, gaussians) -> float:
     """Mean |1/rendered - 1/true| depth over the surface pixels of the views refinement trains on."""
     import torch
 
-    from symdrive_core.optim.reconstruct import depth_loss, load_views, params_from_gaussians, render
+    from symdrive_core.optim.reconstruct import depth_loss, load_views
+    from symdrive_core.splat.render import params_from_gaussians, render_params
     from symdrive_core.world.package import split_frames
 
     params = params_from_gaussians(gaussians, gaussians.sh_degree)
     with torch.no_grad():
         errors = []
         for v in load_views(manifest, split_frames(manifest)[0]):
-            _, alpha, info = render(
+            _, alpha, info = render_params(
                 params, v.K, v.viewmat, v.width, v.height, gaussians.sh_degree, render_depth=True
             )
             errors.append(float(depth_loss(info, alpha, v.depth)))

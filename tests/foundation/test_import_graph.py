@@ -39,12 +39,6 @@ DEFERRED_CYCLES = {
     # rasterize falls back to the pure-torch reference, which calls rasterize for its tile set-up:
     # one render entry (splat/render.py) over both.
     frozenset({"symdrive_core.splat.rasterize", "symdrive_core.splat.reference"}),
-    # evaluate renders with reconstruct.render_gaussians; reconstruct scores its held-out views with
-    # evaluate.evaluate_heldout: the render wrapper belongs in splat/render.py.
-    frozenset({"symdrive_core.optim.reconstruct", "symdrive_core.optim.evaluate"}),
-    # cycle renders with data.SplatRenderer; data.make_pairs runs cycle reconstructions: the render
-    # wrapper belongs in splat/render.py.
-    frozenset({"symdrive_core.diffusion.cycle", "symdrive_core.diffusion.data"}),
 }
 
 
