@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, uint64
 
 from ..conventions import PIXEL_CENTER_OFFSET
 
@@ -34,6 +34,10 @@ ALPHA_MAX = 0.99
 T_STOP = 1e-4
 TILE = 16
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
+LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
+LN2_LO = 1.90821492927058770002e-10
+INV_LN2 = 1.44269504088896338700e+00
+POW2_NEG = 2.0 ** -np.arange(1075.0)  # 2^-k, k = 0 .. 1074 (subnormals included)
 
 
 @njit(cache=True, inline="always")
@@ -42,6 +46,34 @@ def sigma_limit(o, threshold):
     if threshold <= 0.0 or o <= 0.0:
         return np.inf if threshold <= 0.0 else -1.0
     return math.log(o / threshold) * (1.0 + 1e-9) + 1e-9
+
+
+@njit(cache=True, inline="always")
+def exp_neg(s):
+    """exp(-s) within 1 ulp of ``math.exp`` (0 < exp(-s) <= 1, s clamped to [0, 744]).
+
+    Arithmetic, a floor and a table read only, so a pixel loop that calls it vectorises (libm's
+    ``exp`` is a scalar call that keeps the loop scalar). Range reduction s = k ln 2 - r, |r| <= ln2/2,
+    then Taylor to degree 13 (truncation below 2e-17).
+    """
+    x = min(0.0, max(-s, -744.0))
+    kf = math.floor(x * INV_LN2 + 0.5)
+    r = (x - kf * LN2_HI) - kf * LN2_LO
+    q = 1.0 / 6227020800.0
+    q = q * r + 1.0 / 479001600.0
+    q = q * r + 1.0 / 39916800.0
+    q = q * r + 1.0 / 3628800.0
+    q = q * r + 1.0 / 362880.0
+    q = q * r + 1.0 / 40320.0
+    q = q * r + 1.0 / 5040.0
+    q = q * r + 1.0 / 720.0
+    q = q * r + 1.0 / 120.0
+    q = q * r + 1.0 / 24.0
+    q = q * r + 1.0 / 6.0
+    q = q * r + 0.5
+    q = q * r + 1.0
+    q = q * r + 1.0
+    return q * POW2_NEG[int(-kf)]
 
 
 @njit(cache=True, inline="always")
@@ -146,25 +178,31 @@ def _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n, t
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last):
+    if tile_size != TILE:
+        raise ValueError("the compositing kernels need tiles of TILE pixels")
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
         ty = t // tiles_x
         tx = t - ty * tiles_x
-        x0 = tx * tile_size
-        y0 = ty * tile_size
-        x1 = min(x0 + tile_size, width)
-        y1 = min(y0 + tile_size, height)
+        x0 = tx * TILE
+        y0 = ty * TILE
+        x1 = min(x0 + TILE, width)
+        y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
         geo, lim, lg, lcol = _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n,
                                         threshold)
-        npx = tile_size * tile_size
-        T = np.ones(npx)
-        acc = np.zeros((npx, C))
-        last = np.zeros(npx, dtype=np.int64)
-        done = np.zeros(npx, dtype=np.bool_)
-        row_live = np.full(tile_size, x1 - x0, dtype=np.int64)
+        T = np.ones(TILE * TILE)
+        acc = np.zeros((C, TILE * TILE))
+        last = np.zeros(TILE * TILE, dtype=np.int64)
+        done = np.ones(TILE * TILE, dtype=np.uint8)  # pixels outside the image stay done
+        for r in range(y1 - y0):
+            for i in range(x1 - x0):
+                done[r * TILE + i] = 0
+        w = np.zeros(TILE)  # weights alpha T of one Gaussian along one row (0 where skipped)
+        row_live = np.zeros(TILE, dtype=np.int64)
+        row_live[:y1 - y0] = x1 - x0
         live = (x1 - x0) * (y1 - y0)
         for k in range(n):
             if live == 0:
@@ -179,43 +217,47 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             grp = lg[k]
             px0, px1 = pixel_span(mx, geo[k, 6], x0, x1)
             py0, py1 = pixel_span(my, geo[k, 7], y0, y1)
+            if px0 == px1:
+                continue
             for py in range(py0, py1):
                 r = py - y0
                 if row_live[r] == 0:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
-                base = r * tile_size - x0
-                for px in range(px0, px1):
-                    p = base + px
-                    if done[p]:
-                        continue
-                    dx = mx - (px + PIXEL_CENTER_OFFSET)
+                base = r * TILE
+                stops = 0
+                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
                     sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
-                    if sigma < 0.0 or sigma > lk:
-                        continue
-                    alpha = min(ALPHA_MAX, o * math.exp(-sigma))
-                    if alpha < threshold:
-                        continue
+                    alpha = min(ALPHA_MAX, o * exp_neg(sigma))
                     Tp = T[p]
                     next_T = Tp * (1.0 - alpha)
-                    if next_T <= T_STOP:
-                        done[p] = True
-                        row_live[r] -= 1
-                        live -= 1
-                        continue
-                    w = alpha * Tp
-                    for ch in range(C):
-                        acc[p, ch] += lcol[k, ch] * w
-                    if grp >= 0:
-                        out_inst[py, px, grp] += w
-                    T[p] = next_T
-                    last[p] = k + 1
+                    hit = (done[p] == 0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+                    stop = hit & (next_T <= T_STOP)
+                    keep = hit & (next_T > T_STOP)
+                    w[uint64(i)] = alpha * Tp if keep else 0.0
+                    T[p] = next_T if keep else Tp
+                    last[p] = k + 1 if keep else last[p]
+                    done[p] = done[p] | stop
+                    stops += stop
+                row_live[r] -= stops
+                live -= stops
+                for ch in range(C):
+                    col = lcol[k, ch]
+                    acc_ch = acc[ch]
+                    for i in range(TILE):
+                        acc_ch[uint64(base + i)] += col * w[uint64(i)]
+                if grp >= 0:
+                    for px in range(px0, px1):
+                        out_inst[py, px, grp] += w[px - x0]
         for py in range(y0, y1):
-            base = (py - y0) * tile_size - x0
+            base = (py - y0) * TILE - x0
             for px in range(x0, x1):
                 p = base + px
                 for ch in range(C):
-                    out_color[py, px, ch] = acc[p, ch]
+                    out_color[py, px, ch] = acc[ch, p]
                 out_T[py, px] = T[p]
                 out_last[py, px] = start + last[p]
 
@@ -224,33 +266,37 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
 def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst,
                   r_m2d, r_conic, r_opac, r_color):
-    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``)."""
+    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``).
+
+    The rows must come in zeroed: rows of Gaussians that reach no pixel are not written.
+    """
+    if tile_size != TILE:
+        raise ValueError("the compositing kernels need tiles of TILE pixels")
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
         ty = t // tiles_x
         tx = t - ty * tiles_x
-        x0 = tx * tile_size
-        y0 = ty * tile_size
-        x1 = min(x0 + tile_size, width)
-        y1 = min(y0 + tile_size, height)
+        x0 = tx * TILE
+        y0 = ty * TILE
+        x1 = min(x0 + TILE, width)
+        y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
         if n == 0:
             continue
-        npx = tile_size * tile_size
-        end = np.zeros(npx, dtype=np.int64)  # Gaussians [0, end) of the tile reached the pixel
-        row_end = np.zeros(tile_size, dtype=np.int64)
-        T = np.ones(npx)
-        front = np.zeros(npx)  # sum over the contributions so far of (gC . c_j + gI_j) w_j
-        total = np.zeros(npx)  # the same sum over all contributions
-        T_final = np.ones(npx)
-        gA = np.zeros(npx)
-        gC = np.zeros((npx, C))
+        end = np.zeros(TILE * TILE, dtype=np.int64)  # Gaussians [0, end) reached the pixel (0 outside)
+        row_end = np.zeros(TILE, dtype=np.int64)
+        T = np.ones(TILE * TILE)
+        front = np.zeros(TILE * TILE)  # sum over the contributions so far of (gC . c_j + gI_j) w_j
+        total = np.zeros(TILE * TILE)  # the same sum over all contributions
+        T_final = np.ones(TILE * TILE)
+        gA = np.zeros(TILE * TILE)
+        gC = np.zeros((C, TILE * TILE))
         n_end = 0
         for py in range(y0, y1):
             r = py - y0
-            base = r * tile_size - x0
+            base = r * TILE - x0
             for px in range(x0, x1):
                 p = base + px
                 e = out_last[py, px] - start
@@ -261,8 +307,8 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 gA[p] = g_alpha[py, px]
                 s = 0.0
                 for ch in range(C):
-                    gC[p, ch] = g_color[py, px, ch]
-                    s += gC[p, ch] * out_color[py, px, ch]
+                    gC[ch, p] = g_color[py, px, ch]
+                    s += gC[ch, p] * out_color[py, px, ch]
                 for gi in range(n_groups):
                     s += g_inst[py, px, gi] * out_inst[py, px, gi]
                 total[p] = s
@@ -270,6 +316,11 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             continue
         geo, lim, lg, lcol = _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n_end,
                                         threshold)
+        # per pixel of one row, for one Gaussian (0 where skipped): gC . c + gI, w, dL/dsigma, dL/do
+        gdot = np.zeros(TILE)
+        w = np.zeros(TILE)
+        d_sig = np.zeros(TILE)
+        d_op = np.zeros(TILE)
         acol = np.zeros(C)
         for k in range(n_end):
             mx = geo[k, 0]
@@ -282,6 +333,8 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             grp = lg[k]
             px0, px1 = pixel_span(mx, geo[k, 6], x0, x1)
             py0, py1 = pixel_span(my, geo[k, 7], y0, y1)
+            if px0 == px1:
+                continue
             d_mx = 0.0
             d_my = 0.0
             d_a = 0.0
@@ -295,42 +348,54 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 if k >= row_end[r]:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
-                base = r * tile_size - x0
-                for px in range(px0, px1):
-                    p = base + px
-                    if k >= end[p]:
-                        continue
-                    dx = mx - (px + PIXEL_CENTER_OFFSET)
+                base = r * TILE
+                for i in range(TILE):
+                    gdot[i] = 0.0
+                for ch in range(C):
+                    col = lcol[k, ch]
+                    gC_ch = gC[ch]
+                    for i in range(TILE):
+                        gdot[uint64(i)] += gC_ch[uint64(base + i)] * col
+                if grp >= 0:
+                    for px in range(px0, px1):
+                        gdot[px - x0] += g_inst[py, px, grp]
+                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    q = uint64(i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
                     sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
-                    if sigma < 0.0 or sigma > lk:
-                        continue
-                    vis = math.exp(-sigma)
+                    vis = exp_neg(sigma)
                     raw = o * vis
                     alpha = min(ALPHA_MAX, raw)
-                    if alpha < threshold:
-                        continue
+                    hit = (k < end[p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
                     Tp = T[p]
-                    w = alpha * Tp
-                    gdot = 0.0
-                    for ch in range(C):
-                        gdot += gC[p, ch] * lcol[k, ch]
-                        acol[ch] += w * gC[p, ch]
-                    if grp >= 0:
-                        gdot += g_inst[py, px, grp]
-                    fr = front[p] + gdot * w
-                    front[p] = fr
+                    wp = alpha * Tp
+                    fr = front[p] + gdot[q] * wp
                     one_m = 1.0 - alpha
-                    behind = total[p] - fr
-                    dl_dalpha = Tp * gdot - behind / one_m + gA[p] * T_final[p] / one_m
-                    T[p] = Tp * one_m
-                    if raw <= ALPHA_MAX:
-                        d_o += dl_dalpha * vis
-                        dl_dsigma = -dl_dalpha * alpha
-                        d_mx += dl_dsigma * (a * dx + b * dy)
-                        d_my += dl_dsigma * (c * dy + b * dx)
-                        d_a += 0.5 * dx * dx * dl_dsigma
-                        d_b += dx * dy * dl_dsigma
-                        d_c += 0.5 * dy * dy * dl_dsigma
+                    dl_dalpha = Tp * gdot[q] - (total[p] - fr) / one_m + gA[p] * T_final[p] / one_m
+                    front[p] = fr if hit else front[p]
+                    T[p] = Tp * one_m if hit else Tp
+                    w[q] = wp if hit else 0.0
+                    grad = hit & (raw <= ALPHA_MAX)
+                    d_op[q] = dl_dalpha * vis if grad else 0.0
+                    d_sig[q] = -dl_dalpha * alpha if grad else 0.0
+                # sums in pixel order over the box (the rule skips every pixel outside it)
+                for px in range(px0, px1):
+                    i = px - x0
+                    dx = mx - (px + PIXEL_CENTER_OFFSET)
+                    ds = d_sig[i]
+                    d_o += d_op[i]
+                    d_mx += ds * (a * dx + b * dy)
+                    d_my += ds * (c * dy + b * dx)
+                    d_a += 0.5 * dx * dx * ds
+                    d_b += dx * dy * ds
+                    d_c += 0.5 * dy * dy * ds
+                for ch in range(C):
+                    s = acol[ch]
+                    for px in range(px0, px1):
+                        s += w[px - x0] * gC[ch, base + px - x0]
+                    acol[ch] = s
             j = start + k
             r_m2d[j, 0] = d_mx
             r_m2d[j, 1] = d_my
