@@ -33,6 +33,7 @@ from ..conventions import PIXEL_CENTER_OFFSET
 ALPHA_MAX = 0.99
 T_STOP = 1e-4
 TILE = 16
+LOAD_CHUNK = 32  # records a forward tile reads at a time
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
 LN2_LO = 1.90821492927058770002e-10
@@ -48,13 +49,14 @@ def sigma_limit(o, threshold):
     return math.log(o / threshold) * (1.0 + 1e-9) + 1e-9
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath={"contract"})
 def exp_neg(s):
     """exp(-s) within 1 ulp of ``math.exp`` (0 < exp(-s) <= 1, s clamped to [0, 744]).
 
     Arithmetic, a floor and a table read only, so a pixel loop that calls it vectorises (libm's
     ``exp`` is a scalar call that keeps the loop scalar). Range reduction s = k ln 2 - r, |r| <= ln2/2,
-    then Taylor to degree 13 (truncation below 2e-17).
+    then Taylor to degree 13 (truncation below 2e-17) by fused multiply-adds (``contract``, in this
+    function only: the callers' decisions keep plain rounding).
     """
     x = min(0.0, max(-s, -744.0))
     kf = math.floor(x * INV_LN2 + 0.5)
@@ -151,28 +153,39 @@ def bin_tiles(order, rects, tiles_x, tiles_y):
     return offsets, ids
 
 
+# one float64 record per Gaussian, read once per tile-Gaussian intersection (one contiguous read
+# instead of four scattered ones, and the limit and box computed once per Gaussian)
+R_MX, R_MY, R_A, R_B, R_C, R_O, R_HX, R_HY, R_LIM, R_GROUP, R_COLOR = range(11)
+
+
 @njit(cache=True, inline="always")
-def _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n, threshold):
-    """Tile-local float64 copies of the tile's Gaussians, with their sigma limit and box half widths."""
+def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
     C = colors.shape[1]
-    geo = np.empty((n, 8))  # mean x, mean y, conic a, b, c, opacity, half width x, half width y
-    lim = np.empty(n)
-    lg = np.empty(n, dtype=np.int64)
-    lcol = np.empty((n, C))
-    for k in range(n):
-        g = ids[start + k]
-        geo[k, 0] = means2d[g, 0]
-        geo[k, 1] = means2d[g, 1]
-        geo[k, 2] = conics[g, 0]
-        geo[k, 3] = conics[g, 1]
-        geo[k, 4] = conics[g, 2]
-        geo[k, 5] = opac[g]
-        lim[k] = sigma_limit(geo[k, 5], threshold)
-        geo[k, 6], geo[k, 7] = ellipse_half_extent(geo[k, 2], geo[k, 3], geo[k, 4], lim[k])
-        lg[k] = groups[g] if n_groups > 0 else -1
+    m = means2d.shape[0]
+    rec = np.empty((m, R_COLOR + C))
+    for g in prange(m):
+        rec[g, R_MX] = means2d[g, 0]
+        rec[g, R_MY] = means2d[g, 1]
+        rec[g, R_A] = conics[g, 0]
+        rec[g, R_B] = conics[g, 1]
+        rec[g, R_C] = conics[g, 2]
+        rec[g, R_O] = opac[g]
+        lim = sigma_limit(rec[g, R_O], threshold)
+        rec[g, R_LIM] = lim
+        rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
+        rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
         for ch in range(C):
-            lcol[k, ch] = colors[g, ch]
-    return geo, lim, lg, lcol
+            rec[g, R_COLOR + ch] = colors[g, ch]
+    return rec
+
+
+@njit(cache=True, inline="always")
+def _copy_records(rec, ids, start, k0, k1, loc):
+    """Rows [k0, k1) of the tile's records into ``loc`` (a tight loop keeps many reads in flight)."""
+    for k in range(k0, k1):
+        g = ids[start + k]
+        for f in range(rec.shape[1]):
+            loc[k, f] = rec[g, f]
 
 
 @njit(parallel=True, cache=True)
@@ -180,6 +193,7 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                   tile_size, threshold, out_color, out_T, out_inst, out_last):
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
+    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
@@ -191,8 +205,6 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
-        geo, lim, lg, lcol = _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n,
-                                        threshold)
         T = np.ones(TILE * TILE)
         acc = np.zeros((C, TILE * TILE))
         last = np.zeros(TILE * TILE, dtype=np.int64)
@@ -204,19 +216,25 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         row_live = np.zeros(TILE, dtype=np.int64)
         row_live[:y1 - y0] = x1 - x0
         live = (x1 - x0) * (y1 - y0)
+        loc = np.empty((n, rec.shape[1]))
+        loaded = 0  # read in chunks: a tile whose pixels all stop early never reads the rest of its list
         for k in range(n):
             if live == 0:
                 break
-            mx = geo[k, 0]
-            my = geo[k, 1]
-            a = geo[k, 2]
-            b = geo[k, 3]
-            c = geo[k, 4]
-            o = geo[k, 5]
-            lk = lim[k]
-            grp = lg[k]
-            px0, px1 = pixel_span(mx, geo[k, 6], x0, x1)
-            py0, py1 = pixel_span(my, geo[k, 7], y0, y1)
+            if k == loaded:
+                loaded = min(n, loaded + LOAD_CHUNK)
+                _copy_records(rec, ids, start, k, loaded, loc)
+            g = loc[k]
+            mx = g[R_MX]
+            my = g[R_MY]
+            a = g[R_A]
+            b = g[R_B]
+            c = g[R_C]
+            o = g[R_O]
+            lk = g[R_LIM]
+            grp = int(g[R_GROUP])
+            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
+            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
             if px0 == px1:
                 continue
             for py in range(py0, py1):
@@ -226,6 +244,7 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 dy = my - (py + PIXEL_CENTER_OFFSET)
                 base = r * TILE
                 stops = 0
+                kept = 0
                 # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
                 for i in range(TILE):
                     p = uint64(base + i)
@@ -242,10 +261,13 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     last[p] = k + 1 if keep else last[p]
                     done[p] = done[p] | stop
                     stops += stop
+                    kept += keep
                 row_live[r] -= stops
                 live -= stops
+                if kept == 0:
+                    continue
                 for ch in range(C):
-                    col = lcol[k, ch]
+                    col = g[R_COLOR + ch]
                     acc_ch = acc[ch]
                     for i in range(TILE):
                         acc_ch[uint64(base + i)] += col * w[uint64(i)]
@@ -272,6 +294,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
     """
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
+    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
@@ -314,35 +337,35 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 total[p] = s
         if n_end <= 0:
             continue
-        geo, lim, lg, lcol = _load_tile(means2d, conics, opac, colors, groups, n_groups, ids, start, n_end,
-                                        threshold)
-        # per pixel of one row, for one Gaussian (0 where skipped): gC . c + gI, w, dL/dsigma, dL/do
+        # per pixel of one row, for one Gaussian: gC . c + gI and the weight alpha T (0 where skipped)
         gdot = np.zeros(TILE)
         w = np.zeros(TILE)
-        d_sig = np.zeros(TILE)
-        d_op = np.zeros(TILE)
-        acol = np.zeros(C)
+        # per lane (tile column), summed over the rows of one Gaussian: d mean x, y, d conic a, b, c,
+        # d opacity, then d colour per channel; the lanes are summed once per Gaussian
+        lanes = np.zeros((6 + C, TILE))
+        loc = np.empty((n_end, rec.shape[1]))
+        _copy_records(rec, ids, start, 0, n_end, loc)
         for k in range(n_end):
-            mx = geo[k, 0]
-            my = geo[k, 1]
-            a = geo[k, 2]
-            b = geo[k, 3]
-            c = geo[k, 4]
-            o = geo[k, 5]
-            lk = lim[k]
-            grp = lg[k]
-            px0, px1 = pixel_span(mx, geo[k, 6], x0, x1)
-            py0, py1 = pixel_span(my, geo[k, 7], y0, y1)
+            g = loc[k]
+            mx = g[R_MX]
+            my = g[R_MY]
+            a = g[R_A]
+            b = g[R_B]
+            c = g[R_C]
+            o = g[R_O]
+            lk = g[R_LIM]
+            grp = int(g[R_GROUP])
+            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
+            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
             if px0 == px1:
                 continue
-            d_mx = 0.0
-            d_my = 0.0
-            d_a = 0.0
-            d_b = 0.0
-            d_c = 0.0
-            d_o = 0.0
-            for ch in range(C):
-                acol[ch] = 0.0
+            lanes[:] = 0.0
+            g_mx = lanes[0]
+            g_my = lanes[1]
+            g_a = lanes[2]
+            g_b = lanes[3]
+            g_c = lanes[4]
+            g_o = lanes[5]
             for py in range(py0, py1):
                 r = py - y0
                 if k >= row_end[r]:
@@ -352,7 +375,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 for i in range(TILE):
                     gdot[i] = 0.0
                 for ch in range(C):
-                    col = lcol[k, ch]
+                    col = g[R_COLOR + ch]
                     gC_ch = gC[ch]
                     for i in range(TILE):
                         gdot[uint64(i)] += gC_ch[uint64(base + i)] * col
@@ -378,33 +401,36 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     T[p] = Tp * one_m if hit else Tp
                     w[q] = wp if hit else 0.0
                     grad = hit & (raw <= ALPHA_MAX)
-                    d_op[q] = dl_dalpha * vis if grad else 0.0
-                    d_sig[q] = -dl_dalpha * alpha if grad else 0.0
-                # sums in pixel order over the box (the rule skips every pixel outside it)
-                for px in range(px0, px1):
-                    i = px - x0
-                    dx = mx - (px + PIXEL_CENTER_OFFSET)
-                    ds = d_sig[i]
-                    d_o += d_op[i]
-                    d_mx += ds * (a * dx + b * dy)
-                    d_my += ds * (c * dy + b * dx)
-                    d_a += 0.5 * dx * dx * ds
-                    d_b += dx * dy * ds
-                    d_c += 0.5 * dy * dy * ds
+                    ds = -dl_dalpha * alpha if grad else 0.0
+                    g_o[q] += dl_dalpha * vis if grad else 0.0
+                    g_mx[q] += ds * (a * dx + b * dy)
+                    g_my[q] += ds * (c * dy + b * dx)
+                    g_a[q] += 0.5 * dx * dx * ds
+                    g_b[q] += dx * dy * ds
+                    g_c[q] += 0.5 * dy * dy * ds
                 for ch in range(C):
-                    s = acol[ch]
-                    for px in range(px0, px1):
-                        s += w[px - x0] * gC[ch, base + px - x0]
-                    acol[ch] = s
+                    g_ch = lanes[6 + ch]
+                    gC_ch = gC[ch]
+                    for i in range(TILE):
+                        g_ch[uint64(i)] += w[uint64(i)] * gC_ch[uint64(base + i)]
             j = start + k
-            r_m2d[j, 0] = d_mx
-            r_m2d[j, 1] = d_my
-            r_conic[j, 0] = d_a
-            r_conic[j, 1] = d_b
-            r_conic[j, 2] = d_c
-            r_opac[j] = d_o
+            r_m2d[j, 0] = _lane_sum(g_mx, px0 - x0, px1 - x0)
+            r_m2d[j, 1] = _lane_sum(g_my, px0 - x0, px1 - x0)
+            r_conic[j, 0] = _lane_sum(g_a, px0 - x0, px1 - x0)
+            r_conic[j, 1] = _lane_sum(g_b, px0 - x0, px1 - x0)
+            r_conic[j, 2] = _lane_sum(g_c, px0 - x0, px1 - x0)
+            r_opac[j] = _lane_sum(g_o, px0 - x0, px1 - x0)
             for ch in range(C):
-                r_color[j, ch] = acol[ch]
+                r_color[j, ch] = _lane_sum(lanes[6 + ch], px0 - x0, px1 - x0)
+
+
+@njit(cache=True, inline="always")
+def _lane_sum(v, i0, i1):
+    """Sum of v[i0:i1] in index order (the lanes a Gaussian's box covers; the others hold zeros)."""
+    s = 0.0
+    for i in range(i0, i1):
+        s += v[i]
+    return s
 
 
 @njit(cache=True)
