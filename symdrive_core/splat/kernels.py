@@ -29,6 +29,9 @@ import numpy as np
 from numba import njit, prange, uint64
 
 from ..conventions import PIXEL_CENTER_OFFSET
+from .compile_notice import announce_compiles
+
+announce_compiles()
 
 ALPHA_MAX = 0.99
 T_STOP = 1e-4
