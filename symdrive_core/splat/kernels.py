@@ -36,6 +36,8 @@ announce_compiles()
 ALPHA_MAX = 0.99
 T_STOP = 1e-4
 TILE = 16
+NPX = TILE * TILE
+FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
@@ -208,18 +210,23 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
-        T = np.ones(TILE * TILE)
-        acc = np.zeros((C, TILE * TILE))
-        last = np.zeros(TILE * TILE, dtype=np.int64)
-        done = np.ones(TILE * TILE, dtype=np.uint8)  # pixels outside the image stay done
+        # per-pixel state in one buffer at constant offsets from the pixel, so that the row loop needs
+        # no aliasing checks: T, done (0/1), last index + 1, weight alpha T, then the colour sums
+        o_done = uint64(NPX)
+        o_last = uint64(2 * NPX)
+        o_w = uint64(3 * NPX)
+        o_acc = uint64(4 * NPX)
+        st = np.zeros((4 + max(C, FUSED_CHANNELS)) * NPX)
+        st[:NPX] = 1.0
+        st[NPX:2 * NPX] = 1.0  # pixels outside the image stay done
         for r in range(y1 - y0):
             for i in range(x1 - x0):
-                done[r * TILE + i] = 0
-        w = np.zeros(TILE)  # weights alpha T of one Gaussian along one row (0 where skipped)
+                st[NPX + r * TILE + i] = 0.0
         row_live = np.zeros(TILE, dtype=np.int64)
         row_live[:y1 - y0] = x1 - x0
         live = (x1 - x0) * (y1 - y0)
         loc = np.empty((n, rec.shape[1]))
+        col = np.zeros(max(C, FUSED_CHANNELS))
         loaded = 0  # read in chunks: a tile whose pixels all stop early never reads the rest of its list
         for k in range(n):
             if live == 0:
@@ -240,6 +247,13 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             py0, py1 = pixel_span(my, g[R_HY], y0, y1)
             if px0 == px1:
                 continue
+            for ch in range(C):
+                col[ch] = g[R_COLOR + ch]
+            c0 = col[0]
+            c1 = col[1]
+            c2 = col[2]
+            c3 = col[3]
+            kk = float(k + 1)
             for py in range(py0, py1):
                 r = py - y0
                 if row_live[r] == 0:
@@ -254,37 +268,42 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
                     sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
                     alpha = min(ALPHA_MAX, o * exp_neg(sigma))
-                    Tp = T[p]
+                    Tp = st[p]
                     next_T = Tp * (1.0 - alpha)
-                    hit = (done[p] == 0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+                    hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
                     stop = hit & (next_T <= T_STOP)
                     keep = hit & (next_T > T_STOP)
-                    w[uint64(i)] = alpha * Tp if keep else 0.0
-                    T[p] = next_T if keep else Tp
-                    last[p] = k + 1 if keep else last[p]
-                    done[p] = done[p] | stop
+                    wv = alpha * Tp if keep else 0.0
+                    st[o_w + p] = wv
+                    st[p] = next_T if keep else Tp
+                    st[o_last + p] = kk if keep else st[o_last + p]
+                    st[o_done + p] = 1.0 if stop else st[o_done + p]
+                    st[o_acc + p] += c0 * wv
+                    st[o_acc + uint64(NPX) + p] += c1 * wv
+                    st[o_acc + uint64(2 * NPX) + p] += c2 * wv
+                    st[o_acc + uint64(3 * NPX) + p] += c3 * wv
                     stops += stop
                     kept += keep
                 row_live[r] -= stops
                 live -= stops
                 if kept == 0:
                     continue
-                for ch in range(C):
-                    col = g[R_COLOR + ch]
-                    acc_ch = acc[ch]
+                for ch in range(FUSED_CHANNELS, C):
+                    cv = col[ch]
                     for i in range(TILE):
-                        acc_ch[uint64(base + i)] += col * w[uint64(i)]
+                        p = uint64(base + i)
+                        st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
                 if grp >= 0:
                     for px in range(px0, px1):
-                        out_inst[py, px, grp] += w[px - x0]
+                        out_inst[py, px, grp] += st[3 * NPX + base + px - x0]
         for py in range(y0, y1):
             base = (py - y0) * TILE - x0
             for px in range(x0, x1):
                 p = base + px
                 for ch in range(C):
-                    out_color[py, px, ch] = acc[ch, p]
-                out_T[py, px] = T[p]
-                out_last[py, px] = start + last[p]
+                    out_color[py, px, ch] = st[(4 + ch) * NPX + p]
+                out_T[py, px] = st[p]
+                out_last[py, px] = start + int(st[2 * NPX + p])
 
 
 @njit(parallel=True, cache=True)
@@ -399,7 +418,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     wp = alpha * Tp
                     fr = front[p] + gdot[q] * wp
                     one_m = 1.0 - alpha
-                    dl_dalpha = Tp * gdot[q] - (total[p] - fr) / one_m + gA[p] * T_final[p] / one_m
+                    dl_dalpha = Tp * gdot[q] + (gA[p] * T_final[p] - (total[p] - fr)) / one_m
                     front[p] = fr if hit else front[p]
                     T[p] = Tp * one_m if hit else Tp
                     w[q] = wp if hit else 0.0
