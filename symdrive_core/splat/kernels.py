@@ -37,6 +37,8 @@ ALPHA_MAX = 0.99
 T_STOP = 1e-4
 TILE = 16
 NPX = TILE * TILE
+# backward per-pixel state: slots of NPX values (see rasterize_bwd)
+B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
@@ -330,14 +332,14 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         n = offsets[t + 1] - start
         if n == 0:
             continue
-        end = np.zeros(TILE * TILE, dtype=np.int64)  # Gaussians [0, end) reached the pixel (0 outside)
+        # per-pixel state in one buffer at constant offsets from the pixel (no aliasing checks in the row
+        # loop): T and front sum so far, total sum, final T, dL/dalpha_pixel, the number of Gaussians that
+        # reached the pixel, the extra part of gC . c + gI (channels past the fused ones, the group), the
+        # row's results (weight, dL/dsigma, dL/do), then gC per channel
+        nch = max(C, FUSED_CHANNELS)
+        st = np.zeros((B_GC + nch) * NPX)
+        st[:NPX] = 1.0
         row_end = np.zeros(TILE, dtype=np.int64)
-        T = np.ones(TILE * TILE)
-        front = np.zeros(TILE * TILE)  # sum over the contributions so far of (gC . c_j + gI_j) w_j
-        total = np.zeros(TILE * TILE)  # the same sum over all contributions
-        T_final = np.ones(TILE * TILE)
-        gA = np.zeros(TILE * TILE)
-        gC = np.zeros((C, TILE * TILE))
         n_end = 0
         for py in range(y0, y1):
             r = py - y0
@@ -345,28 +347,37 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             for px in range(x0, x1):
                 p = base + px
                 e = out_last[py, px] - start
-                end[p] = e
+                st[B_END * NPX + p] = e
                 row_end[r] = max(row_end[r], e)
                 n_end = max(n_end, e)
-                T_final[p] = out_T[py, px]
-                gA[p] = g_alpha[py, px]
-                s = 0.0
+                st[B_TFIN * NPX + p] = out_T[py, px]
+                st[B_GA * NPX + p] = g_alpha[py, px]
+                tot = 0.0
                 for ch in range(C):
-                    gC[ch, p] = g_color[py, px, ch]
-                    s += gC[ch, p] * out_color[py, px, ch]
+                    gc = np.float64(g_color[py, px, ch])  # float64 products whatever the storage
+                    st[(B_GC + ch) * NPX + p] = gc
+                    tot += gc * out_color[py, px, ch]
                 for gi in range(n_groups):
-                    s += g_inst[py, px, gi] * out_inst[py, px, gi]
-                total[p] = s
+                    tot += g_inst[py, px, gi] * out_inst[py, px, gi]
+                st[B_TOTAL * NPX + p] = tot
         if n_end <= 0:
             continue
-        # per pixel of one row, for one Gaussian: gC . c + gI and the weight alpha T (0 where skipped)
-        gdot = np.zeros(TILE)
-        w = np.zeros(TILE)
-        # per lane (tile column), summed over the rows of one Gaussian: d mean x, y, d conic a, b, c,
-        # d opacity, then d colour per channel; the lanes are summed once per Gaussian
-        lanes = np.zeros((6 + C, TILE))
+        o_front = uint64(B_FRONT * NPX)
+        o_total = uint64(B_TOTAL * NPX)
+        o_tfin = uint64(B_TFIN * NPX)
+        o_ga = uint64(B_GA * NPX)
+        o_end = uint64(B_END * NPX)
+        o_extra = uint64(B_EXTRA * NPX)
+        o_w = uint64(B_W * NPX)
+        o_ds = uint64(B_DSIG * NPX)
+        o_do = uint64(B_DOP * NPX)
+        o_gc = uint64(B_GC * NPX)
         loc = np.empty((n_end, rec.shape[1]))
         _copy_records(rec, ids, start, 0, n_end, loc)
+        col = np.zeros(nch)
+        # per lane (tile column), summed over the rows of one Gaussian: d mean x, y, d conic a, b, c,
+        # d opacity, then d colour per channel; the lanes are summed once per Gaussian
+        lanes = np.zeros((6 + nch) * TILE)
         for k in range(n_end):
             g = loc[k]
             mx = g[R_MX]
@@ -381,77 +392,95 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             py0, py1 = pixel_span(my, g[R_HY], y0, y1)
             if px0 == px1:
                 continue
+            for ch in range(C):
+                col[ch] = g[R_COLOR + ch]
+            c0 = col[0]
+            c1 = col[1]
+            c2 = col[2]
+            c3 = col[3]
+            kf = float(k)
             lanes[:] = 0.0
-            g_mx = lanes[0]
-            g_my = lanes[1]
-            g_a = lanes[2]
-            g_b = lanes[3]
-            g_c = lanes[4]
-            g_o = lanes[5]
             for py in range(py0, py1):
                 r = py - y0
                 if k >= row_end[r]:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
                 base = r * TILE
-                for i in range(TILE):
-                    gdot[i] = 0.0
-                for ch in range(C):
-                    col = g[R_COLOR + ch]
-                    gC_ch = gC[ch]
+                extra_used = C > FUSED_CHANNELS or grp >= 0
+                if extra_used:
                     for i in range(TILE):
-                        gdot[uint64(i)] += gC_ch[uint64(base + i)] * col
-                if grp >= 0:
-                    for px in range(px0, px1):
-                        gdot[px - x0] += g_inst[py, px, grp]
+                        p = base + i
+                        extra = 0.0
+                        for ch in range(FUSED_CHANNELS, C):
+                            extra += st[(B_GC + ch) * NPX + p] * col[ch]
+                        st[B_EXTRA * NPX + p] = extra
+                    if grp >= 0:
+                        for px in range(px0, px1):
+                            st[B_EXTRA * NPX + base + px - x0] += g_inst[py, px, grp]
                 # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
                 for i in range(TILE):
                     p = uint64(base + i)
-                    q = uint64(i)
                     dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
                     sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
                     vis = exp_neg(sigma)
                     raw = o * vis
                     alpha = min(ALPHA_MAX, raw)
-                    hit = (k < end[p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
-                    Tp = T[p]
+                    hit = (kf < st[o_end + p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+                    gdot = (st[o_gc + p] * c0 + st[o_gc + uint64(NPX) + p] * c1 + st[o_gc + uint64(2 * NPX) + p] * c2
+                            + st[o_gc + uint64(3 * NPX) + p] * c3 + st[o_extra + p])
+                    Tp = st[p]
                     wp = alpha * Tp
-                    fr = front[p] + gdot[q] * wp
+                    fr = st[o_front + p] + gdot * wp
                     one_m = 1.0 - alpha
-                    dl_dalpha = Tp * gdot[q] + (gA[p] * T_final[p] - (total[p] - fr)) / one_m
-                    front[p] = fr if hit else front[p]
-                    T[p] = Tp * one_m if hit else Tp
-                    w[q] = wp if hit else 0.0
+                    dl_dalpha = Tp * gdot + (st[o_ga + p] * st[o_tfin + p] - (st[o_total + p] - fr)) / one_m
+                    st[o_front + p] = fr if hit else st[o_front + p]
+                    st[p] = Tp * one_m if hit else Tp
+                    st[o_w + p] = wp if hit else 0.0
                     grad = hit & (raw <= ALPHA_MAX)
-                    ds = -dl_dalpha * alpha if grad else 0.0
-                    g_o[q] += dl_dalpha * vis if grad else 0.0
-                    g_mx[q] += ds * (a * dx + b * dy)
-                    g_my[q] += ds * (c * dy + b * dx)
-                    g_a[q] += 0.5 * dx * dx * ds
-                    g_b[q] += dx * dy * ds
-                    g_c[q] += 0.5 * dy * dy * ds
-                for ch in range(C):
-                    g_ch = lanes[6 + ch]
-                    gC_ch = gC[ch]
+                    st[o_ds + p] = -dl_dalpha * alpha if grad else 0.0
+                    st[o_do + p] = dl_dalpha * vis if grad else 0.0
+                if extra_used:  # the slot is zero for the next Gaussian
+                    st[B_EXTRA * NPX + base:B_EXTRA * NPX + base + TILE] = 0.0
+                # per-lane sums (two buffers: the row loop above stays free of aliasing checks)
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    q = uint64(i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
+                    ds = st[o_ds + p]
+                    wq = st[o_w + p]
+                    lanes[q] += ds * (a * dx + b * dy)
+                    lanes[uint64(TILE) + q] += ds * (c * dy + b * dx)
+                    lanes[uint64(2 * TILE) + q] += 0.5 * dx * dx * ds
+                    lanes[uint64(3 * TILE) + q] += dx * dy * ds
+                    lanes[uint64(4 * TILE) + q] += 0.5 * dy * dy * ds
+                    lanes[uint64(5 * TILE) + q] += st[o_do + p]
+                    lanes[uint64(6 * TILE) + q] += wq * st[o_gc + p]
+                    lanes[uint64(7 * TILE) + q] += wq * st[o_gc + uint64(NPX) + p]
+                    lanes[uint64(8 * TILE) + q] += wq * st[o_gc + uint64(2 * NPX) + p]
+                    lanes[uint64(9 * TILE) + q] += wq * st[o_gc + uint64(3 * NPX) + p]
+                for ch in range(FUSED_CHANNELS, C):
                     for i in range(TILE):
-                        g_ch[uint64(i)] += w[uint64(i)] * gC_ch[uint64(base + i)]
+                        p = base + i
+                        lanes[(6 + ch) * TILE + i] += st[B_W * NPX + p] * st[(B_GC + ch) * NPX + p]
+            i0 = px0 - x0
+            i1 = px1 - x0
             j = start + k
-            r_m2d[j, 0] = _lane_sum(g_mx, px0 - x0, px1 - x0)
-            r_m2d[j, 1] = _lane_sum(g_my, px0 - x0, px1 - x0)
-            r_conic[j, 0] = _lane_sum(g_a, px0 - x0, px1 - x0)
-            r_conic[j, 1] = _lane_sum(g_b, px0 - x0, px1 - x0)
-            r_conic[j, 2] = _lane_sum(g_c, px0 - x0, px1 - x0)
-            r_opac[j] = _lane_sum(g_o, px0 - x0, px1 - x0)
+            r_m2d[j, 0] = _lane_sum(lanes, 0, i0, i1)
+            r_m2d[j, 1] = _lane_sum(lanes, 1, i0, i1)
+            r_conic[j, 0] = _lane_sum(lanes, 2, i0, i1)
+            r_conic[j, 1] = _lane_sum(lanes, 3, i0, i1)
+            r_conic[j, 2] = _lane_sum(lanes, 4, i0, i1)
+            r_opac[j] = _lane_sum(lanes, 5, i0, i1)
             for ch in range(C):
-                r_color[j, ch] = _lane_sum(lanes[6 + ch], px0 - x0, px1 - x0)
+                r_color[j, ch] = _lane_sum(lanes, 6 + ch, i0, i1)
 
 
 @njit(cache=True, inline="always")
-def _lane_sum(v, i0, i1):
-    """Sum of v[i0:i1] in index order (the lanes a Gaussian's box covers; the others hold zeros)."""
+def _lane_sum(lanes, f, i0, i1):
+    """Sum of quantity ``f``'s lanes [i0, i1) in index order (the lanes a Gaussian's box covers)."""
     s = 0.0
-    for i in range(i0, i1):
-        s += v[i]
+    for i in range(f * TILE + i0, f * TILE + i1):
+        s += lanes[i]
     return s
 
 

@@ -17,6 +17,7 @@ import pytest
 from symdrive_core.splat import kernels, kernels_baseline
 
 THRESHOLD = 1.0 / 255.0
+N_GROUPS = 3
 
 
 def scene_2d(n, width, height, seed, kind):
@@ -55,25 +56,30 @@ def bins_of(means, radii, depths, width, height):
     return offsets, ids, tiles_x
 
 
-def run_both(module, means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype, seed):
-    """Forward outputs and backward rows of one kernel module."""
-    C = colors.shape[1]
-    G = 3
-    args = (means.astype(dtype), conics.astype(dtype), opac.astype(dtype), colors.astype(dtype), groups, G,
+def kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype):
+    return (means.astype(dtype), conics.astype(dtype), opac.astype(dtype), colors.astype(dtype), groups, N_GROUPS,
             offsets, ids, width, height, tiles_x, kernels.TILE, THRESHOLD)
-    out_color = np.zeros((height, width, C), dtype)
-    out_T = np.ones((height, width))
-    out_inst = np.zeros((height, width, G), dtype)
-    out_last = np.zeros((height, width), np.int64)
-    module.rasterize_fwd(*args, out_color, out_T, out_inst, out_last)
+
+
+def forward(module, args):
+    """Colour, T, instance weights and last index of one kernel module's forward."""
+    width, height, colors = args[8], args[9], args[3]
+    out = (np.zeros((height, width, colors.shape[1]), colors.dtype), np.ones((height, width)),
+           np.zeros((height, width, N_GROUPS), colors.dtype), np.zeros((height, width), np.int64))
+    module.rasterize_fwd(*args, *out)
+    return out
+
+
+def backward(module, args, fwd_out, seed):
+    """Gradient rows of one kernel module's backward for random output gradients."""
+    width, height, colors = args[8], args[9], args[3]
+    C, dtype, m = colors.shape[1], colors.dtype, args[7].shape[0]
     rng = np.random.default_rng(seed + 100)
-    g_color = rng.normal(size=(height, width, C)).astype(dtype)
-    g_alpha = rng.normal(size=(height, width)).astype(dtype)
-    g_inst = rng.normal(size=(height, width, G)).astype(dtype)
-    m = ids.shape[0]
+    grads = (rng.normal(size=(height, width, C)).astype(dtype), rng.normal(size=(height, width)).astype(dtype),
+             rng.normal(size=(height, width, N_GROUPS)).astype(dtype))
     rows = (np.zeros((m, 2), dtype), np.zeros((m, 3), dtype), np.zeros(m, dtype), np.zeros((m, C), dtype))
-    module.rasterize_bwd(*args, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst, *rows)
-    return (out_color, out_T, out_inst, out_last), rows
+    module.rasterize_bwd(*args, *fwd_out, *grads, *rows)
+    return rows
 
 
 CASES = [("tiny", 400, 61, 45), ("huge", 60, 64, 48), ("mixed", 300, 70, 50), ("dense", 400, 33, 47)]
@@ -85,14 +91,18 @@ CASES = [("tiny", 400, 61, 45), ("huge", 60, 64, 48), ("mixed", 300, 70, 50), ("
 def test_kernels_match_baseline(kind, n, width, height, dtype, seed):
     means, conics, opac, colors, groups, radii, depths = scene_2d(n, width, height, seed, kind)
     offsets, ids, tiles_x = bins_of(means, radii, depths, width, height)
-    common = (means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype, seed)
-    (color, T, inst, last), rows = run_both(kernels, *common)
-    (color_b, T_b, inst_b, last_b), rows_b = run_both(kernels_baseline, *common)
+    args = kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype)
+    color, T, inst, last = forward(kernels, args)
+    base_out = forward(kernels_baseline, args)
+    color_b, T_b, inst_b, last_b = base_out
     np.testing.assert_array_equal(last, last_b)  # the same Gaussians reached every pixel
     tol = 1e-12 if dtype == np.float64 else 1e-6
     np.testing.assert_allclose(T, T_b, atol=1e-12, rtol=0)
     np.testing.assert_allclose(color, color_b, atol=tol, rtol=0)
     np.testing.assert_allclose(inst, inst_b, atol=tol, rtol=0)
+    # both backward passes from the same forward outputs (float32 storage rounds each forward's own)
+    rows = backward(kernels, args, base_out, seed)
+    rows_b = backward(kernels_baseline, args, base_out, seed)
     for got, want in zip(rows, rows_b):
         scale = max(1.0, float(np.abs(want).max()))
         np.testing.assert_allclose(got, want, atol=tol * scale, rtol=0)
