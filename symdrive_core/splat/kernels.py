@@ -41,6 +41,8 @@ NPX = TILE * TILE
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
+BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
+RADIX_BITS = 11  # bits per pass of the depth sort
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
 LN2_LO = 1.90821492927058770002e-10
@@ -137,26 +139,80 @@ def tile_rects(means2d, radii, tile_size, tiles_x, tiles_y):
     return rects
 
 
+def depth_order(depths: np.ndarray) -> np.ndarray:
+    """Indices sorting ``depths`` (float32/float64) ascending, ties by index: ``np.argsort(kind="stable")``.
+
+    An LSD radix sort of the IEEE bit patterns (sign folded so that the unsigned order is the float
+    order), ``RADIX_BITS`` per pass: a few streaming passes instead of a comparison sort.
+    """
+    depths = np.ascontiguousarray(depths) + depths.dtype.type(0.0)  # -0.0 -> +0.0 (equal, ties by index)
+    n_bits = depths.dtype.itemsize * 8
+    bits = depths.view(np.uint32 if n_bits == 32 else np.uint64).astype(np.uint64)
+    sign = np.uint64(1) << np.uint64(n_bits - 1)
+    full = np.uint64((1 << n_bits) - 1)
+    codes = np.where(bits & sign, bits ^ full, bits | sign)
+    return _radix_order(codes, n_bits)
+
+
 @njit(cache=True)
+def _radix_order(codes, n_bits):
+    n = codes.shape[0]
+    order = np.arange(n, dtype=np.int64)
+    tmp = np.empty(n, dtype=np.int64)
+    n_buckets = 1 << RADIX_BITS
+    mask = np.uint64(n_buckets - 1)
+    for shift in range(0, n_bits, RADIX_BITS):
+        sh = np.uint64(shift)
+        counts = np.zeros(n_buckets + 1, dtype=np.int64)
+        for i in range(n):
+            counts[((codes[i] >> sh) & mask) + np.uint64(1)] += 1
+        if counts.max() == n:
+            continue  # every key has the same digit here: the pass would not move anything
+        for d in range(n_buckets):
+            counts[d + 1] += counts[d]
+        for j in range(n):
+            i = order[j]
+            d = (codes[i] >> sh) & mask
+            tmp[counts[d]] = i
+            counts[d] += 1
+        order, tmp = tmp, order
+    return order
+
+
+@njit(parallel=True, cache=True)
 def bin_tiles(order, rects, tiles_x, tiles_y):
-    """Per-tile lists of Gaussians in ``order`` (front to back): (offsets[n_tiles+1], ids[n_isect])."""
+    """Per-tile lists of Gaussians in ``order`` (front to back): (offsets[n_tiles+1], ids[n_isect]).
+
+    ``order`` is cut into ``BIN_CHUNKS`` pieces counted and written in parallel; within a tile the
+    pieces follow each other in order, so the lists are those of one pass in ``order``.
+    """
     n_tiles = tiles_x * tiles_y
-    counts = np.zeros(n_tiles + 1, dtype=np.int64)
-    for j in range(order.shape[0]):
-        i = order[j]
-        for ty in range(rects[i, 2], rects[i, 3]):
-            for tx in range(rects[i, 0], rects[i, 1]):
-                counts[ty * tiles_x + tx + 1] += 1
-    offsets = np.cumsum(counts)
+    m = order.shape[0]
+    counts = np.zeros((BIN_CHUNKS, n_tiles), dtype=np.int64)
+    for ch in prange(BIN_CHUNKS):
+        for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
+            i = order[j]
+            for ty in range(rects[i, 2], rects[i, 3]):
+                for tx in range(rects[i, 0], rects[i, 1]):
+                    counts[ch, ty * tiles_x + tx] += 1
+    offsets = np.zeros(n_tiles + 1, dtype=np.int64)
+    for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
+        at = offsets[t]
+        for ch in range(BIN_CHUNKS):
+            c = counts[ch, t]
+            counts[ch, t] = at
+            at += c
+        offsets[t + 1] = at
     ids = np.empty(offsets[n_tiles], dtype=np.int32)
-    cursor = offsets[:n_tiles].copy()
-    for j in range(order.shape[0]):
-        i = order[j]
-        for ty in range(rects[i, 2], rects[i, 3]):
-            for tx in range(rects[i, 0], rects[i, 1]):
-                t = ty * tiles_x + tx
-                ids[cursor[t]] = i
-                cursor[t] += 1
+    for ch in prange(BIN_CHUNKS):
+        cursor = counts[ch]
+        for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
+            i = order[j]
+            for ty in range(rects[i, 2], rects[i, 3]):
+                for tx in range(rects[i, 0], rects[i, 1]):
+                    t = ty * tiles_x + tx
+                    ids[cursor[t]] = i
+                    cursor[t] += 1
     return offsets, ids
 
 

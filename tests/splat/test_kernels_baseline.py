@@ -135,3 +135,23 @@ def test_box_holds_every_pixel_the_rule_keeps():
         # and the box is tight: it is at most one pixel wider than the ellipse on each side
         assert px1 - px0 <= 2 * hx + 2 and py1 - py0 <= 2 * hy + 2
         assert math.isfinite(hx) and math.isfinite(hy)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_depth_order_is_a_stable_argsort(dtype):
+    rng = np.random.default_rng(5)
+    depths = np.concatenate([rng.uniform(0.01, 1e4, 5000), rng.integers(0, 20, 3000) * 0.5,  # many ties
+                             [0.0, -0.0, -3.0, np.inf, 1e-30, 5e30]]).astype(dtype)
+    rng.shuffle(depths)
+    np.testing.assert_array_equal(kernels.depth_order(depths), np.argsort(depths, kind="stable"))
+
+
+def test_parallel_binning_keeps_the_depth_order_in_every_tile():
+    means, conics, opac, colors, groups, radii, depths = scene_2d(3000, 200, 120, 4, "mixed")
+    offsets, ids, tiles_x = bins_of(means, radii, depths, 200, 120)
+    rects = kernels.tile_rects(means, radii, kernels.TILE, tiles_x, (120 + 15) // 16)
+    order = np.argsort(depths, kind="stable")
+    for t in range(offsets.shape[0] - 1):
+        tx, ty = t % tiles_x, t // tiles_x
+        inside = (rects[order, 0] <= tx) & (tx < rects[order, 1]) & (rects[order, 2] <= ty) & (ty < rects[order, 3])
+        np.testing.assert_array_equal(ids[offsets[t]:offsets[t + 1]], order[inside])
