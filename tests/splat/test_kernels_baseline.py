@@ -155,3 +155,11 @@ def test_parallel_binning_keeps_the_depth_order_in_every_tile():
         tx, ty = t % tiles_x, t // tiles_x
         inside = (rects[order, 0] <= tx) & (tx < rects[order, 1]) & (rects[order, 2] <= ty) & (ty < rects[order, 3])
         np.testing.assert_array_equal(ids[offsets[t]:offsets[t + 1]], order[inside])
+
+
+def test_vector_exp_is_within_two_ulp_of_libm():
+    s = np.concatenate([np.random.default_rng(6).uniform(0.0, 8.0, 20000), np.linspace(0.0, 744.0, 5000),
+                        [0.0, 1e-300, 5e-324, 744.0]])
+    got = np.array([kernels.exp_neg(v) for v in s])
+    want = np.exp(-s)
+    assert np.all(np.abs(got - want) <= 2 * np.spacing(want))
