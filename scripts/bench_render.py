@@ -135,14 +135,16 @@ def bench_resolutions(n, resolutions, ref_max_pixels, results):
 
 @contextlib.contextmanager
 def compositing(module, spent):
-    """Render with ``module``'s compositing kernels; ``spent["fwd"/"bwd"]`` gets each call's seconds."""
+    """Render with ``module``'s compositing kernels; ``spent`` gets each call's wall and CPU seconds
+    (``fwd``, ``fwd_cpu``, ``bwd``, ``bwd_cpu``; CPU time of all threads: the work, whatever else runs)."""
     saved = kernels.rasterize_fwd, kernels.rasterize_bwd
 
     def timed(name, fn):
         def call(*args):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             fn(*args)
             spent[name] = time.perf_counter() - t
+            spent[name + "_cpu"] = time.process_time() - c
         return call
 
     kernels.rasterize_fwd = timed("fwd", module.rasterize_fwd)
@@ -160,7 +162,7 @@ def bench_baseline(n, res, results, repeat=3):
     print(f"\n## Compositing kernels vs the pixel-outer baseline: {n} Gaussians, {W}x{H}, "
           f"{numba.get_num_threads()} threads (s, best of {repeat}; ratio = baseline / current)")
     print(f"{'case':>16} {'baseline':>9} {'current':>9} {'ratio':>6}   {'kernel base':>11} {'kernel cur':>10} "
-          f"{'ratio':>6}")
+          f"{'ratio':>6}   {'kernel CPU s base':>16} {'cur':>6} {'ratio':>6}")
     for backward in (False, True):
         def run():
             if not backward:
@@ -171,7 +173,7 @@ def bench_baseline(n, res, results, repeat=3):
             (out[0].sum() + out[1].sum()).backward()
             return out
 
-        best = {"baseline": [math.inf, math.inf], "current": [math.inf, math.inf]}  # whole, kernels
+        best = {name: [math.inf] * 3 for name in ("baseline", "current")}  # whole, kernels, kernels' CPU
         for rep in range(repeat + 1):  # the first round compiles and warms up
             for name, module in (("baseline", kernels_baseline), ("current", kernels)):
                 spent = {}
@@ -180,14 +182,17 @@ def bench_baseline(n, res, results, repeat=3):
                     info = run()[2]
                     dt = time.perf_counter() - t
                 if rep:
-                    b = best[name]
-                    b[0], b[1] = min(b[0], dt), min(b[1], sum(spent.values()))
-        (bw, bk), (cw, ck) = best["baseline"], best["current"]
+                    wall = sum(v for k, v in spent.items() if not k.endswith("_cpu"))
+                    cpu = sum(v for k, v in spent.items() if k.endswith("_cpu"))
+                    best[name] = [min(b, v) for b, v in zip(best[name], (dt, wall, cpu))]
+        (bw, bk, bc), (cw, ck, cc) = best["baseline"], best["current"]
         label = "fwd+bwd" if backward else "fwd"
-        print(f"{label:>16} {bw:9.3f} {cw:9.3f} {bw / cw:5.2f}x   {bk:11.3f} {ck:10.3f} {bk / ck:5.2f}x", flush=True)
+        print(f"{label:>16} {bw:9.3f} {cw:9.3f} {bw / cw:5.2f}x   {bk:11.3f} {ck:10.3f} {bk / ck:5.2f}x   "
+              f"{bc:16.3f} {cc:6.3f} {bc / cc:5.2f}x", flush=True)
         results.append({"table": "baseline", "n": n, "width": W, "height": H, "backward": backward,
                         "threads": numba.get_num_threads(), "baseline_s": bw, "current_s": cw, "ratio": bw / cw,
                         "baseline_kernel_s": bk, "current_kernel_s": ck, "kernel_ratio": bk / ck,
+                        "baseline_kernel_cpu_s": bc, "current_kernel_cpu_s": cc, "kernel_cpu_ratio": bc / cc,
                         "n_isect": info["n_isect"]})
 
 
