@@ -42,7 +42,8 @@ ALPHA_MAX = 0.99
 T_STOP = 1e-4
 TILE = 16
 NPX = TILE * TILE
-# backward per-pixel state: slots of NPX values (see rasterize_bwd)
+# per-pixel state of a tile, slots of NPX values: forward (see rasterize_fwd) and backward (rasterize_bwd)
+F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
@@ -275,16 +276,16 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         n = offsets[t + 1] - start
         # per-pixel state in one buffer at constant offsets from the pixel, so that the row loop needs
         # no aliasing checks: T, done (0/1), last index + 1, weight alpha T, then the colour sums
-        o_done = uint64(NPX)
-        o_last = uint64(2 * NPX)
-        o_w = uint64(3 * NPX)
-        o_acc = uint64(4 * NPX)
-        st = np.zeros((4 + max(C, FUSED_CHANNELS)) * NPX)
-        st[:NPX] = 1.0
-        st[NPX:2 * NPX] = 1.0  # pixels outside the image stay done
+        o_done = uint64(F_DONE * NPX)
+        o_last = uint64(F_LAST * NPX)
+        o_w = uint64(F_W * NPX)
+        o_acc = uint64(F_ACC * NPX)
+        st = np.zeros((F_ACC + max(C, FUSED_CHANNELS)) * NPX)
+        st[F_T * NPX:(F_T + 1) * NPX] = 1.0
+        st[F_DONE * NPX:(F_DONE + 1) * NPX] = 1.0  # pixels outside the image stay done
         for r in range(y1 - y0):
             for i in range(x1 - x0):
-                st[NPX + r * TILE + i] = 0.0
+                st[F_DONE * NPX + r * TILE + i] = 0.0
         row_live = np.zeros(TILE, dtype=np.int64)
         row_live[:y1 - y0] = x1 - x0
         live = (x1 - x0) * (y1 - y0)
@@ -331,7 +332,7 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
                     sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
                     alpha = min(ALPHA_MAX, o * exp_neg(sigma))
-                    Tp = st[p]
+                    Tp = st[p]  # F_T / B_T: slot 0
                     next_T = Tp * (1.0 - alpha)
                     hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
                     stop = hit & (next_T <= T_STOP)
@@ -358,15 +359,15 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                         st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
                 if grp >= 0:
                     for px in range(px0, px1):
-                        out_inst[py, px, grp] += st[3 * NPX + base + px - x0]
+                        out_inst[py, px, grp] += st[F_W * NPX + base + px - x0]
         for py in range(y0, y1):
             base = (py - y0) * TILE - x0
             for px in range(x0, x1):
                 p = base + px
                 for ch in range(C):
-                    out_color[py, px, ch] = st[(4 + ch) * NPX + p]
-                out_T[py, px] = st[p]
-                out_last[py, px] = start + int(st[2 * NPX + p])
+                    out_color[py, px, ch] = st[(F_ACC + ch) * NPX + p]
+                out_T[py, px] = st[F_T * NPX + p]
+                out_last[py, px] = start + int(st[F_LAST * NPX + p])
 
 
 @njit(parallel=True, cache=True)
@@ -399,7 +400,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         # row's results (weight, dL/dsigma, dL/do), then gC per channel
         nch = max(C, FUSED_CHANNELS)
         st = np.zeros((B_GC + nch) * NPX)
-        st[:NPX] = 1.0
+        st[B_T * NPX:(B_T + 1) * NPX] = 1.0
         row_end = np.zeros(TILE, dtype=np.int64)
         n_end = 0
         for py in range(y0, y1):
@@ -489,7 +490,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     hit = (kf < st[o_end + p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
                     gdot = (st[o_gc + p] * c0 + st[o_gc + uint64(NPX) + p] * c1 + st[o_gc + uint64(2 * NPX) + p] * c2
                             + st[o_gc + uint64(3 * NPX) + p] * c3 + st[o_extra + p])
-                    Tp = st[p]
+                    Tp = st[p]  # F_T / B_T: slot 0
                     wp = alpha * Tp
                     fr = st[o_front + p] + gdot * wp
                     one_m = 1.0 - alpha
