@@ -3,8 +3,12 @@
     python scripts/bench_render.py --quick            # ~1 minute subset
     python scripts/bench_render.py --json out.json    # everything (several minutes)
 
-Reports forward and forward+backward times vs Gaussian count and resolution (numba kernels next to
-the pure-torch reference, with the ratio), tile-Gaussian intersections per second, peak RSS of a
+Reports the compositing kernels against the pixel-outer kernels they replaced
+(``symdrive_core.splat.kernels_baseline``), same scene, same thread count, alternating runs: the
+whole forward and forward+backward and the compositing kernels alone, with the ratios; the first
+demo-street frame of a fresh process (numba cache warm); forward and forward+backward times vs
+Gaussian count and resolution (numba kernels next to the pure-torch reference, with the ratio),
+tile-Gaussian intersections per second, peak RSS of a
 1M-Gaussian 1280x720 render (measured in a fresh subprocess), the vehicle-count table (5/10/25/50
 vehicles on a large background) and accuracy-vs-time knobs against the float64 oracle. The load
 average is printed too: other processes on the machine slow multi-threaded timings down.
@@ -13,6 +17,7 @@ average is printed too: other processes on the machine slow multi-threaded timin
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -21,12 +26,21 @@ import subprocess
 import sys
 import time
 
+import numba
 import numpy as np
 import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from symdrive_core.splat import GaussianTensors, Layer, rasterize, render_layers, render_oracle
+from symdrive_core.splat import (
+    GaussianTensors,
+    Layer,
+    kernels,
+    kernels_baseline,
+    rasterize,
+    render_layers,
+    render_oracle,
+)
 
 
 def make_scene(n, width, height, seed=0, deg=3, dtype=torch.float32, fov_deg=70.0):
@@ -117,6 +131,103 @@ def bench_resolutions(n, resolutions, ref_max_pixels, results):
             results.append({"table": "resolution", "n": n, "width": W, "height": H, "backward": backward,
                             "numba_s": tn, "reference_s": tr, "ratio": tr / tn if tr else None,
                             "n_isect": info["n_isect"], "isect_per_s": info["n_isect"] / tn})
+
+
+@contextlib.contextmanager
+def compositing(module, spent):
+    """Render with ``module``'s compositing kernels; ``spent`` gets each call's wall and CPU seconds
+    (``fwd``, ``fwd_cpu``, ``bwd``, ``bwd_cpu``; CPU time of all threads: the work, whatever else runs)."""
+    saved = kernels.rasterize_fwd, kernels.rasterize_bwd
+
+    def timed(name, fn):
+        def call(*args):
+            t, c = time.perf_counter(), time.process_time()
+            fn(*args)
+            spent[name] = time.perf_counter() - t
+            spent[name + "_cpu"] = time.process_time() - c
+        return call
+
+    kernels.rasterize_fwd = timed("fwd", module.rasterize_fwd)
+    kernels.rasterize_bwd = timed("bwd", module.rasterize_bwd)
+    try:
+        yield
+    finally:
+        kernels.rasterize_fwd, kernels.rasterize_bwd = saved
+
+
+def bench_baseline(n, res, results, repeat=3):
+    """Current compositing kernels against the baseline: alternating runs, best of ``repeat`` each."""
+    W, H = res
+    ps, V, K = make_scene(n, W, H)
+    print(f"\n## Compositing kernels vs the pixel-outer baseline: {n} Gaussians, {W}x{H}, "
+          f"{numba.get_num_threads()} threads (s, best of {repeat}; ratio = baseline / current)")
+    print(f"{'case':>16} {'baseline':>9} {'current':>9} {'ratio':>6}   {'kernel base':>11} {'kernel cur':>10} "
+          f"{'ratio':>6}   {'kernel CPU s base':>16} {'cur':>6} {'ratio':>6}")
+    for backward in (False, True):
+        def run():
+            if not backward:
+                with torch.no_grad():
+                    return rasterize(*ps, V, K, W, H)
+            leaf = [p.detach().requires_grad_(True) for p in ps]
+            out = rasterize(*leaf, V, K, W, H)
+            (out[0].sum() + out[1].sum()).backward()
+            return out
+
+        best = {name: [math.inf] * 3 for name in ("baseline", "current")}  # whole, kernels, kernels' CPU
+        for rep in range(repeat + 1):  # the first round compiles and warms up
+            for name, module in (("baseline", kernels_baseline), ("current", kernels)):
+                spent = {}
+                with compositing(module, spent):
+                    t = time.perf_counter()
+                    info = run()[2]
+                    dt = time.perf_counter() - t
+                if rep:
+                    wall = sum(v for k, v in spent.items() if not k.endswith("_cpu"))
+                    cpu = sum(v for k, v in spent.items() if k.endswith("_cpu"))
+                    best[name] = [min(b, v) for b, v in zip(best[name], (dt, wall, cpu))]
+        (bw, bk, bc), (cw, ck, cc) = best["baseline"], best["current"]
+        label = "fwd+bwd" if backward else "fwd"
+        print(f"{label:>16} {bw:9.3f} {cw:9.3f} {bw / cw:5.2f}x   {bk:11.3f} {ck:10.3f} {bk / ck:5.2f}x   "
+              f"{bc:16.3f} {cc:6.3f} {bc / cc:5.2f}x", flush=True)
+        results.append({"table": "baseline", "n": n, "width": W, "height": H, "backward": backward,
+                        "threads": numba.get_num_threads(), "baseline_s": bw, "current_s": cw, "ratio": bw / cw,
+                        "baseline_kernel_s": bk, "current_kernel_s": ck, "kernel_ratio": bk / ck,
+                        "baseline_kernel_cpu_s": bc, "current_kernel_cpu_s": cc, "kernel_cpu_ratio": bc / cc,
+                        "n_isect": info["n_isect"]})
+
+
+FIRST_FRAME = """
+import time
+t0 = time.perf_counter()
+from symdrive_core.pipeline.demo import DEMO_PACKAGE
+from symdrive_core.pipeline.preview import preview_manifest
+from symdrive_core.pipeline.scene_render import SceneRenderer
+from symdrive_core.scene import load_manifest
+t1 = time.perf_counter()
+renderer = SceneRenderer(preview_manifest(load_manifest(DEMO_PACKAGE), "front"), device="cpu")
+renderer.render("front", 0)
+t2 = time.perf_counter()
+renderer.render("front", 1)
+t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def bench_first_frame(results):
+    """The demo street's first frame in fresh processes: once to fill numba's cache, then timed."""
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    env = {**os.environ, "PYTHONPATH": os.path.abspath(root)}
+    runs = []
+    for _ in range(3):
+        done = subprocess.run([sys.executable, "-c", FIRST_FRAME], capture_output=True, text=True, check=True,
+                              env=env)
+        runs.append([float(v) for v in done.stdout.split()] + ["compiling" in done.stderr])
+    imports, first, second, compiled = runs[-1]
+    print(f"\n## Demo street, fresh process, numba cache warm: imports {imports:.2f} s, first frame {first:.2f} s, "
+          f"second frame {second:.2f} s (first process compiled: {runs[0][3]}, "
+          f"first frame {runs[0][1]:.2f} s)")
+    results.append({"table": "first_frame", "imports_s": imports, "first_frame_s": first, "second_frame_s": second,
+                    "compiled_in_first_process": runs[0][3], "first_process_first_frame_s": runs[0][1]})
 
 
 def rss_child(n, width, height):
@@ -228,7 +339,7 @@ def main():
     ap.add_argument("--quick", action="store_true", help="small subset (~1 minute)")
     ap.add_argument("--json", help="write all numbers to this file")
     ap.add_argument("--threads", type=int, default=0, help="torch and numba threads (default: all cores)")
-    ap.add_argument("--only", default="", help="comma list of: counts,res,rss,vehicles,knobs")
+    ap.add_argument("--only", default="", help="comma list of: baseline,first,counts,res,rss,vehicles,knobs")
     ap.add_argument("--counts", default="", help="comma list overriding the count sweep (e.g. 100000)")
     ap.add_argument("--vehicle-sizes", default="", help="comma list overriding the vehicle sizes (e.g. 4000)")
     ap.add_argument("--background", type=int, default=0, help="background Gaussians of the vehicle table")
@@ -247,6 +358,10 @@ def main():
           f"load average={os.getloadavg()[0]:.2f} quick={args.quick}")
     results = []
     t0 = time.time()
+    if want("baseline"):
+        bench_baseline(*((100_000, (640, 360)) if args.quick else (1_000_000, (1280, 720))), results)
+    if want("first"):
+        bench_first_frame(results)
     if args.quick:
         if want("counts"):
             bench_counts([1_000, 10_000, 100_000], (320, 180), 10_000, results, ref_bwd_max=1_000)

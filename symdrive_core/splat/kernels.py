@@ -7,11 +7,23 @@ Gaussians are composited front to back in depth order:
     alpha = min(0.99, o exp(-sigma))                 skipped when sigma < 0 or alpha < threshold
     stop when T (1 - alpha) <= 1e-4, that Gaussian excluded
 
+Inside a tile the loop runs Gaussian-outer, pixel-inner over a per-pixel state (T, colour sums,
+last index, done flag): each Gaussian visits only the rows of its own box, the bounding box of the
+ellipse where alpha can reach the threshold (``sigma <= sigma_limit``); rows whose pixels have all
+stopped are skipped, and the tile ends when every pixel has stopped. A row is one branch-free loop
+over the tile's 16 pixels (selects instead of ``if``, unsigned indices so numba emits no
+negative-index wraparound, the state in one buffer at constant offsets so LLVM needs no aliasing
+checks, and ``exp_neg`` instead of libm's scalar ``exp``), which LLVM turns into a few vector
+instructions per row. Pixels outside the box would have been skipped by the rule above, so the
+decisions are those of a pixel-outer loop over all Gaussians of the tile; sums differ from that
+order only by rounding. Each Gaussian is packed once per frame into one float64 record (geometry,
+sigma limit, box half widths, group, colour), read per intersection in chunks.
+
 Arithmetic is float64 inside the kernels whatever the storage dtype, and forward and backward
 evaluate alpha with the same expression, so they take the same decisions. The backward pass runs
-front to back again, gets the "behind" sums from the forward's final values, and writes one
-gradient row per tile-Gaussian intersection (race free, deterministic); rows are summed per
-Gaussian afterwards.
+front to back again with per-pixel running sums, gets the "behind" sums from the forward's final
+values, and writes one gradient row per tile-Gaussian intersection (race free, deterministic);
+rows are summed per Gaussian afterwards.
 """
 
 from __future__ import annotations
@@ -19,18 +31,94 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, uint64
 
 from ..conventions import PIXEL_CENTER_OFFSET
+from .compile_notice import announce_compiles
 from .constants import ALPHA_MAX, T_STOP
+from .constants import TILE_SIZE as TILE
+
+announce_compiles()
+
+NPX = TILE * TILE
+# per-pixel state of a tile, slots of NPX values: forward (see rasterize_fwd) and backward (rasterize_bwd)
+F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
+B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
+FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
+LOAD_CHUNK = 32  # records a forward tile reads at a time
+BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
+RADIX_BITS = 11  # bits per pass of the depth sort
+BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
+LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
+LN2_LO = 1.90821492927058770002e-10
+INV_LN2 = 1.44269504088896338700e+00
+POW2_NEG = 2.0 ** -np.arange(1075.0)  # 2^-k, k = 0 .. 1074 (subnormals included)
 
 
 @njit(cache=True, inline="always")
-def _sigma_limit(o, threshold):
+def sigma_limit(o, threshold):
     """A sigma above which alpha is certainly below the threshold (skips the exp; exact test follows)."""
     if threshold <= 0.0 or o <= 0.0:
         return np.inf if threshold <= 0.0 else -1.0
     return math.log(o / threshold) * (1.0 + 1e-9) + 1e-9
+
+
+@njit(cache=True, fastmath={"contract"})
+def exp_neg(s):
+    """exp(-s) within 2 ulp of ``math.exp`` (0 < exp(-s) <= 1, s clamped to [0, 744]).
+
+    Arithmetic, a floor and a table read only, so a pixel loop that calls it vectorises (libm's
+    ``exp`` is a scalar call that keeps the loop scalar). Range reduction s = k ln 2 - r, |r| <= ln2/2,
+    then Taylor to degree 13 (truncation below 2e-17) by fused multiply-adds (``contract``, in this
+    function only: the callers' decisions keep plain rounding).
+    """
+    x = min(0.0, max(-s, -744.0))
+    kf = math.floor(x * INV_LN2 + 0.5)
+    r = (x - kf * LN2_HI) - kf * LN2_LO
+    q = 1.0 / 6227020800.0
+    q = q * r + 1.0 / 479001600.0
+    q = q * r + 1.0 / 39916800.0
+    q = q * r + 1.0 / 3628800.0
+    q = q * r + 1.0 / 362880.0
+    q = q * r + 1.0 / 40320.0
+    q = q * r + 1.0 / 5040.0
+    q = q * r + 1.0 / 720.0
+    q = q * r + 1.0 / 120.0
+    q = q * r + 1.0 / 24.0
+    q = q * r + 1.0 / 6.0
+    q = q * r + 0.5
+    q = q * r + 1.0
+    q = q * r + 1.0
+    return q * POW2_NEG[int(-kf)]
+
+
+@njit(cache=True, inline="always")
+def pixel_span(m, half, lo, hi):
+    """Pixels [p0, p1) of [lo, hi) whose centre lies within ``half`` of ``m`` (all of them if unbounded)."""
+    if not (half < np.inf and abs(m) < np.inf):
+        return lo, hi
+    first = max(float(lo), np.ceil(m - half - PIXEL_CENTER_OFFSET))
+    stop = min(float(hi), np.floor(m + half - PIXEL_CENTER_OFFSET) + 1.0)
+    if not first < stop:
+        return lo, lo
+    return int(first), int(stop)
+
+
+@njit(cache=True, inline="always")
+def ellipse_half_extent(a, b, c, lim):
+    """Half widths (x, y) of the set ``a dx^2/2 + b dx dy + c dy^2/2 <= lim`` (inf when unbounded or unknown).
+
+    The box is widened by ``BOX_MARGIN`` so that a pixel left out has a sigma clearly above ``lim``
+    (where the rule skips it anyway); a negative ``lim`` (zero opacity) gives an empty box.
+    """
+    det = a * c - b * b
+    if not (lim < np.inf and a > 0.0 and c > 0.0 and det > 0.0):
+        return np.inf, np.inf
+    if lim < 0.0:
+        return -1.0, -1.0
+    s = 2.0 * lim / det
+    return (math.sqrt(s * c) * (1.0 + BOX_MARGIN) + BOX_MARGIN,
+            math.sqrt(s * a) * (1.0 + BOX_MARGIN) + BOX_MARGIN)
 
 
 @njit(parallel=True, cache=True)
@@ -56,198 +144,405 @@ def tile_rects(means2d, radii, tile_size, tiles_x, tiles_y):
     return rects
 
 
+def depth_order(depths: np.ndarray) -> np.ndarray:
+    """Indices sorting ``depths`` (float32/float64) ascending, ties by index: ``np.argsort(kind="stable")``.
+
+    An LSD radix sort of the IEEE bit patterns (sign folded so that the unsigned order is the float
+    order), ``RADIX_BITS`` per pass: a few streaming passes instead of a comparison sort.
+    """
+    depths = np.ascontiguousarray(depths) + depths.dtype.type(0.0)  # -0.0 -> +0.0 (equal, ties by index)
+    n_bits = depths.dtype.itemsize * 8
+    bits = depths.view(np.uint32 if n_bits == 32 else np.uint64).astype(np.uint64)
+    sign = np.uint64(1) << np.uint64(n_bits - 1)
+    full = np.uint64((1 << n_bits) - 1)
+    codes = np.where(bits & sign, bits ^ full, bits | sign)
+    return _radix_order(codes, n_bits)
+
+
 @njit(cache=True)
+def _radix_order(codes, n_bits):
+    n = codes.shape[0]
+    order = np.arange(n, dtype=np.int64)
+    tmp = np.empty(n, dtype=np.int64)
+    n_buckets = 1 << RADIX_BITS
+    mask = np.uint64(n_buckets - 1)
+    for shift in range(0, n_bits, RADIX_BITS):
+        sh = np.uint64(shift)
+        counts = np.zeros(n_buckets + 1, dtype=np.int64)
+        for i in range(n):
+            counts[((codes[i] >> sh) & mask) + np.uint64(1)] += 1
+        if counts.max() == n:
+            continue  # every key has the same digit here: the pass would not move anything
+        for d in range(n_buckets):
+            counts[d + 1] += counts[d]
+        for j in range(n):
+            i = order[j]
+            d = (codes[i] >> sh) & mask
+            tmp[counts[d]] = i
+            counts[d] += 1
+        order, tmp = tmp, order
+    return order
+
+
+@njit(parallel=True, cache=True)
 def bin_tiles(order, rects, tiles_x, tiles_y):
-    """Per-tile lists of Gaussians in ``order`` (front to back): (offsets[n_tiles+1], ids[n_isect])."""
+    """Per-tile lists of Gaussians in ``order`` (front to back): (offsets[n_tiles+1], ids[n_isect]).
+
+    ``order`` is cut into ``BIN_CHUNKS`` pieces counted and written in parallel; within a tile the
+    pieces follow each other in order, so the lists are those of one pass in ``order``.
+    """
     n_tiles = tiles_x * tiles_y
-    counts = np.zeros(n_tiles + 1, dtype=np.int64)
-    for j in range(order.shape[0]):
-        i = order[j]
-        for ty in range(rects[i, 2], rects[i, 3]):
-            for tx in range(rects[i, 0], rects[i, 1]):
-                counts[ty * tiles_x + tx + 1] += 1
-    offsets = np.cumsum(counts)
+    m = order.shape[0]
+    counts = np.zeros((BIN_CHUNKS, n_tiles), dtype=np.int64)
+    for ch in prange(BIN_CHUNKS):
+        for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
+            i = order[j]
+            for ty in range(rects[i, 2], rects[i, 3]):
+                for tx in range(rects[i, 0], rects[i, 1]):
+                    counts[ch, ty * tiles_x + tx] += 1
+    offsets = np.zeros(n_tiles + 1, dtype=np.int64)
+    for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
+        at = offsets[t]
+        for ch in range(BIN_CHUNKS):
+            c = counts[ch, t]
+            counts[ch, t] = at
+            at += c
+        offsets[t + 1] = at
     ids = np.empty(offsets[n_tiles], dtype=np.int32)
-    cursor = offsets[:n_tiles].copy()
-    for j in range(order.shape[0]):
-        i = order[j]
-        for ty in range(rects[i, 2], rects[i, 3]):
-            for tx in range(rects[i, 0], rects[i, 1]):
-                t = ty * tiles_x + tx
-                ids[cursor[t]] = i
-                cursor[t] += 1
+    for ch in prange(BIN_CHUNKS):
+        cursor = counts[ch]
+        for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
+            i = order[j]
+            for ty in range(rects[i, 2], rects[i, 3]):
+                for tx in range(rects[i, 0], rects[i, 1]):
+                    t = ty * tiles_x + tx
+                    ids[cursor[t]] = i
+                    cursor[t] += 1
     return offsets, ids
+
+
+# one float64 record per Gaussian, read once per tile-Gaussian intersection (one contiguous read
+# instead of four scattered ones, and the limit and box computed once per Gaussian)
+R_MX, R_MY, R_A, R_B, R_C, R_O, R_HX, R_HY, R_LIM, R_GROUP, R_COLOR = range(11)
+
+
+@njit(cache=True, inline="always")
+def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
+    C = colors.shape[1]
+    m = means2d.shape[0]
+    rec = np.empty((m, R_COLOR + C))
+    for g in prange(m):
+        rec[g, R_MX] = means2d[g, 0]
+        rec[g, R_MY] = means2d[g, 1]
+        rec[g, R_A] = conics[g, 0]
+        rec[g, R_B] = conics[g, 1]
+        rec[g, R_C] = conics[g, 2]
+        rec[g, R_O] = opac[g]
+        lim = sigma_limit(rec[g, R_O], threshold)
+        rec[g, R_LIM] = lim
+        rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
+        rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
+        for ch in range(C):
+            rec[g, R_COLOR + ch] = colors[g, ch]
+    return rec
+
+
+@njit(cache=True, inline="always")
+def _copy_records(rec, ids, start, k0, k1, loc):
+    """Rows [k0, k1) of the tile's records into ``loc`` (a tight loop keeps many reads in flight)."""
+    for k in range(k0, k1):
+        g = ids[start + k]
+        for f in range(rec.shape[1]):
+            loc[k, f] = rec[g, f]
 
 
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last):
+    if tile_size != TILE:
+        raise ValueError("the compositing kernels need tiles of TILE pixels")
+    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
         ty = t // tiles_x
         tx = t - ty * tiles_x
-        x0 = tx * tile_size
-        y0 = ty * tile_size
-        x1 = min(x0 + tile_size, width)
-        y1 = min(y0 + tile_size, height)
+        x0 = tx * TILE
+        y0 = ty * TILE
+        x1 = min(x0 + TILE, width)
+        y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
-        lmx = np.empty(n)
-        lmy = np.empty(n)
-        la = np.empty(n)
-        lb = np.empty(n)
-        lc = np.empty(n)
-        lo = np.empty(n)
-        lim = np.empty(n)
-        lg = np.empty(n, dtype=np.int64)
-        lcol = np.empty((n, C))
+        # per-pixel state in one buffer at constant offsets from the pixel, so that the row loop needs
+        # no aliasing checks: T, done (0/1), last index + 1, weight alpha T, then the colour sums
+        o_done = uint64(F_DONE * NPX)
+        o_last = uint64(F_LAST * NPX)
+        o_w = uint64(F_W * NPX)
+        o_acc = uint64(F_ACC * NPX)
+        st = np.zeros((F_ACC + max(C, FUSED_CHANNELS)) * NPX)
+        st[F_T * NPX:(F_T + 1) * NPX] = 1.0
+        st[F_DONE * NPX:(F_DONE + 1) * NPX] = 1.0  # pixels outside the image stay done
+        for r in range(y1 - y0):
+            for i in range(x1 - x0):
+                st[F_DONE * NPX + r * TILE + i] = 0.0
+        row_live = np.zeros(TILE, dtype=np.int64)
+        row_live[:y1 - y0] = x1 - x0
+        live = (x1 - x0) * (y1 - y0)
+        loc = np.empty((n, rec.shape[1]))
+        col = np.zeros(max(C, FUSED_CHANNELS))
+        loaded = 0  # read in chunks: a tile whose pixels all stop early never reads the rest of its list
         for k in range(n):
-            g = ids[start + k]
-            lmx[k] = means2d[g, 0]
-            lmy[k] = means2d[g, 1]
-            la[k] = conics[g, 0]
-            lb[k] = conics[g, 1]
-            lc[k] = conics[g, 2]
-            lo[k] = opac[g]
-            lim[k] = _sigma_limit(lo[k], threshold)
-            lg[k] = groups[g] if n_groups > 0 else -1
+            if live == 0:
+                break
+            if k == loaded:
+                loaded = min(n, loaded + LOAD_CHUNK)
+                _copy_records(rec, ids, start, k, loaded, loc)
+            g = loc[k]
+            mx = g[R_MX]
+            my = g[R_MY]
+            a = g[R_A]
+            b = g[R_B]
+            c = g[R_C]
+            o = g[R_O]
+            lk = g[R_LIM]
+            grp = int(g[R_GROUP])
+            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
+            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
+            if px0 == px1:
+                continue
             for ch in range(C):
-                lcol[k, ch] = colors[g, ch]
-        acc = np.empty(C)
+                col[ch] = g[R_COLOR + ch]
+            c0 = col[0]
+            c1 = col[1]
+            c2 = col[2]
+            c3 = col[3]
+            kk = float(k + 1)
+            for py in range(py0, py1):
+                r = py - y0
+                if row_live[r] == 0:
+                    continue
+                dy = my - (py + PIXEL_CENTER_OFFSET)
+                base = r * TILE
+                stops = 0
+                kept = 0
+                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
+                    sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+                    alpha = min(ALPHA_MAX, o * exp_neg(sigma))
+                    Tp = st[p]  # F_T / B_T: slot 0
+                    next_T = Tp * (1.0 - alpha)
+                    hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+                    stop = hit & (next_T <= T_STOP)
+                    keep = hit & (next_T > T_STOP)
+                    wv = alpha * Tp if keep else 0.0
+                    st[o_w + p] = wv
+                    st[p] = next_T if keep else Tp
+                    st[o_last + p] = kk if keep else st[o_last + p]
+                    st[o_done + p] = 1.0 if stop else st[o_done + p]
+                    st[o_acc + p] += c0 * wv
+                    st[o_acc + uint64(NPX) + p] += c1 * wv
+                    st[o_acc + uint64(2 * NPX) + p] += c2 * wv
+                    st[o_acc + uint64(3 * NPX) + p] += c3 * wv
+                    stops += stop
+                    kept += keep
+                row_live[r] -= stops
+                live -= stops
+                if kept == 0:
+                    continue
+                for ch in range(FUSED_CHANNELS, C):
+                    cv = col[ch]
+                    for i in range(TILE):
+                        p = uint64(base + i)
+                        st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
+                if grp >= 0:
+                    for px in range(px0, px1):
+                        out_inst[py, px, grp] += st[F_W * NPX + base + px - x0]
         for py in range(y0, y1):
-            fy = py + PIXEL_CENTER_OFFSET
+            base = (py - y0) * TILE - x0
             for px in range(x0, x1):
-                fx = px + PIXEL_CENTER_OFFSET
-                T = 1.0
+                p = base + px
                 for ch in range(C):
-                    acc[ch] = 0.0
-                last = 0
-                for k in range(n):
-                    dx = lmx[k] - fx
-                    dy = lmy[k] - fy
-                    sigma = 0.5 * (la[k] * dx * dx + lc[k] * dy * dy) + lb[k] * dx * dy
-                    if sigma < 0.0 or sigma > lim[k]:
-                        continue
-                    alpha = min(ALPHA_MAX, lo[k] * math.exp(-sigma))
-                    if alpha < threshold:
-                        continue
-                    next_T = T * (1.0 - alpha)
-                    if next_T <= T_STOP:
-                        break
-                    w = alpha * T
-                    for ch in range(C):
-                        acc[ch] += lcol[k, ch] * w
-                    if lg[k] >= 0:
-                        out_inst[py, px, lg[k]] += w
-                    T = next_T
-                    last = k + 1
-                for ch in range(C):
-                    out_color[py, px, ch] = acc[ch]
-                out_T[py, px] = T
-                out_last[py, px] = start + last
+                    out_color[py, px, ch] = st[(F_ACC + ch) * NPX + p]
+                out_T[py, px] = st[F_T * NPX + p]
+                out_last[py, px] = start + int(st[F_LAST * NPX + p])
 
 
 @njit(parallel=True, cache=True)
 def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst,
                   r_m2d, r_conic, r_opac, r_color):
-    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``)."""
+    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``).
+
+    The rows must come in zeroed: rows of Gaussians that reach no pixel are not written.
+    """
+    if tile_size != TILE:
+        raise ValueError("the compositing kernels need tiles of TILE pixels")
+    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for t in prange(n_tiles):
         ty = t // tiles_x
         tx = t - ty * tiles_x
-        x0 = tx * tile_size
-        y0 = ty * tile_size
-        x1 = min(x0 + tile_size, width)
-        y1 = min(y0 + tile_size, height)
+        x0 = tx * TILE
+        y0 = ty * TILE
+        x1 = min(x0 + TILE, width)
+        y1 = min(y0 + TILE, height)
         start = offsets[t]
         n = offsets[t + 1] - start
         if n == 0:
             continue
-        lmx = np.empty(n)
-        lmy = np.empty(n)
-        la = np.empty(n)
-        lb = np.empty(n)
-        lc = np.empty(n)
-        lo = np.empty(n)
-        lim = np.empty(n)
-        lg = np.empty(n, dtype=np.int64)
-        lcol = np.empty((n, C))
-        acc = np.zeros((n, 6))  # d mean x, d mean y, d conic a, b, c, d opacity
-        acol = np.zeros((n, C))
-        for k in range(n):
-            g = ids[start + k]
-            lmx[k] = means2d[g, 0]
-            lmy[k] = means2d[g, 1]
-            la[k] = conics[g, 0]
-            lb[k] = conics[g, 1]
-            lc[k] = conics[g, 2]
-            lo[k] = opac[g]
-            lim[k] = _sigma_limit(lo[k], threshold)
-            lg[k] = groups[g] if n_groups > 0 else -1
-            for ch in range(C):
-                lcol[k, ch] = colors[g, ch]
-        gC = np.empty(C)
+        # per-pixel state in one buffer at constant offsets from the pixel (no aliasing checks in the row
+        # loop): T and front sum so far, total sum, final T, dL/dalpha_pixel, the number of Gaussians that
+        # reached the pixel, the extra part of gC . c + gI (channels past the fused ones, the group), the
+        # row's results (weight, dL/dsigma, dL/do), then gC per channel
+        nch = max(C, FUSED_CHANNELS)
+        st = np.zeros((B_GC + nch) * NPX)
+        st[B_T * NPX:(B_T + 1) * NPX] = 1.0
+        row_end = np.zeros(TILE, dtype=np.int64)
+        n_end = 0
         for py in range(y0, y1):
-            fy = py + PIXEL_CENTER_OFFSET
+            r = py - y0
+            base = r * TILE - x0
             for px in range(x0, x1):
-                fx = px + PIXEL_CENTER_OFFSET
-                end = out_last[py, px] - start
-                if end <= 0:
-                    continue
-                T_final = out_T[py, px]
-                gA = g_alpha[py, px]
-                total = 0.0  # sum over all contributions of (gC . c_j + gI_j) w_j
+                p = base + px
+                e = out_last[py, px] - start
+                st[B_END * NPX + p] = e
+                row_end[r] = max(row_end[r], e)
+                n_end = max(n_end, e)
+                st[B_TFIN * NPX + p] = out_T[py, px]
+                st[B_GA * NPX + p] = g_alpha[py, px]
+                tot = 0.0
                 for ch in range(C):
-                    gC[ch] = g_color[py, px, ch]
-                    total += gC[ch] * out_color[py, px, ch]
+                    gc = np.float64(g_color[py, px, ch])  # float64 products whatever the storage
+                    st[(B_GC + ch) * NPX + p] = gc
+                    tot += gc * out_color[py, px, ch]
                 for gi in range(n_groups):
-                    total += g_inst[py, px, gi] * out_inst[py, px, gi]
-                T = 1.0
-                front = 0.0
-                for k in range(end):
-                    dx = lmx[k] - fx
-                    dy = lmy[k] - fy
-                    sigma = 0.5 * (la[k] * dx * dx + lc[k] * dy * dy) + lb[k] * dx * dy
-                    if sigma < 0.0 or sigma > lim[k]:
-                        continue
-                    vis = math.exp(-sigma)
-                    raw = lo[k] * vis
-                    alpha = min(ALPHA_MAX, raw)
-                    if alpha < threshold:
-                        continue
-                    w = alpha * T
-                    gdot = 0.0
-                    for ch in range(C):
-                        gdot += gC[ch] * lcol[k, ch]
-                        acol[k, ch] += w * gC[ch]
-                    if lg[k] >= 0:
-                        gdot += g_inst[py, px, lg[k]]
-                    front += gdot * w
-                    one_m = 1.0 - alpha
-                    behind = total - front
-                    dl_dalpha = T * gdot - behind / one_m + gA * T_final / one_m
-                    T = T * one_m
-                    if raw <= ALPHA_MAX:
-                        acc[k, 5] += dl_dalpha * vis
-                        dl_dsigma = -dl_dalpha * alpha
-                        acc[k, 0] += dl_dsigma * (la[k] * dx + lb[k] * dy)
-                        acc[k, 1] += dl_dsigma * (lc[k] * dy + lb[k] * dx)
-                        acc[k, 2] += 0.5 * dx * dx * dl_dsigma
-                        acc[k, 3] += dx * dy * dl_dsigma
-                        acc[k, 4] += 0.5 * dy * dy * dl_dsigma
-        for k in range(n):
-            j = start + k
-            r_m2d[j, 0] = acc[k, 0]
-            r_m2d[j, 1] = acc[k, 1]
-            r_conic[j, 0] = acc[k, 2]
-            r_conic[j, 1] = acc[k, 3]
-            r_conic[j, 2] = acc[k, 4]
-            r_opac[j] = acc[k, 5]
+                    tot += g_inst[py, px, gi] * out_inst[py, px, gi]
+                st[B_TOTAL * NPX + p] = tot
+        if n_end <= 0:
+            continue
+        o_front = uint64(B_FRONT * NPX)
+        o_total = uint64(B_TOTAL * NPX)
+        o_tfin = uint64(B_TFIN * NPX)
+        o_ga = uint64(B_GA * NPX)
+        o_end = uint64(B_END * NPX)
+        o_extra = uint64(B_EXTRA * NPX)
+        o_w = uint64(B_W * NPX)
+        o_ds = uint64(B_DSIG * NPX)
+        o_do = uint64(B_DOP * NPX)
+        o_gc = uint64(B_GC * NPX)
+        loc = np.empty((n_end, rec.shape[1]))
+        _copy_records(rec, ids, start, 0, n_end, loc)
+        col = np.zeros(nch)
+        # per lane (tile column), summed over the rows of one Gaussian: d mean x, y, d conic a, b, c,
+        # d opacity, then d colour per channel; the lanes are summed once per Gaussian
+        lanes = np.zeros((6 + nch) * TILE)
+        for k in range(n_end):
+            g = loc[k]
+            mx = g[R_MX]
+            my = g[R_MY]
+            a = g[R_A]
+            b = g[R_B]
+            c = g[R_C]
+            o = g[R_O]
+            lk = g[R_LIM]
+            grp = int(g[R_GROUP])
+            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
+            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
+            if px0 == px1:
+                continue
             for ch in range(C):
-                r_color[j, ch] = acol[k, ch]
+                col[ch] = g[R_COLOR + ch]
+            c0 = col[0]
+            c1 = col[1]
+            c2 = col[2]
+            c3 = col[3]
+            kf = float(k)
+            lanes[:] = 0.0
+            for py in range(py0, py1):
+                r = py - y0
+                if k >= row_end[r]:
+                    continue
+                dy = my - (py + PIXEL_CENTER_OFFSET)
+                base = r * TILE
+                extra_used = C > FUSED_CHANNELS or grp >= 0
+                if extra_used:
+                    for i in range(TILE):
+                        p = base + i
+                        extra = 0.0
+                        for ch in range(FUSED_CHANNELS, C):
+                            extra += st[(B_GC + ch) * NPX + p] * col[ch]
+                        st[B_EXTRA * NPX + p] = extra
+                    if grp >= 0:
+                        for px in range(px0, px1):
+                            st[B_EXTRA * NPX + base + px - x0] += g_inst[py, px, grp]
+                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
+                    sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+                    vis = exp_neg(sigma)
+                    raw = o * vis
+                    alpha = min(ALPHA_MAX, raw)
+                    hit = (kf < st[o_end + p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+                    gdot = (st[o_gc + p] * c0 + st[o_gc + uint64(NPX) + p] * c1 + st[o_gc + uint64(2 * NPX) + p] * c2
+                            + st[o_gc + uint64(3 * NPX) + p] * c3 + st[o_extra + p])
+                    Tp = st[p]  # F_T / B_T: slot 0
+                    wp = alpha * Tp
+                    fr = st[o_front + p] + gdot * wp
+                    one_m = 1.0 - alpha
+                    dl_dalpha = Tp * gdot + (st[o_ga + p] * st[o_tfin + p] - (st[o_total + p] - fr)) / one_m
+                    st[o_front + p] = fr if hit else st[o_front + p]
+                    st[p] = Tp * one_m if hit else Tp
+                    st[o_w + p] = wp if hit else 0.0
+                    grad = hit & (raw <= ALPHA_MAX)
+                    st[o_ds + p] = -dl_dalpha * alpha if grad else 0.0
+                    st[o_do + p] = dl_dalpha * vis if grad else 0.0
+                if extra_used:  # the slot is zero for the next Gaussian
+                    st[B_EXTRA * NPX + base:B_EXTRA * NPX + base + TILE] = 0.0
+                # per-lane sums (two buffers: the row loop above stays free of aliasing checks)
+                for i in range(TILE):
+                    p = uint64(base + i)
+                    q = uint64(i)
+                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
+                    ds = st[o_ds + p]
+                    wq = st[o_w + p]
+                    lanes[q] += ds * (a * dx + b * dy)
+                    lanes[uint64(TILE) + q] += ds * (c * dy + b * dx)
+                    lanes[uint64(2 * TILE) + q] += 0.5 * dx * dx * ds
+                    lanes[uint64(3 * TILE) + q] += dx * dy * ds
+                    lanes[uint64(4 * TILE) + q] += 0.5 * dy * dy * ds
+                    lanes[uint64(5 * TILE) + q] += st[o_do + p]
+                    lanes[uint64(6 * TILE) + q] += wq * st[o_gc + p]
+                    lanes[uint64(7 * TILE) + q] += wq * st[o_gc + uint64(NPX) + p]
+                    lanes[uint64(8 * TILE) + q] += wq * st[o_gc + uint64(2 * NPX) + p]
+                    lanes[uint64(9 * TILE) + q] += wq * st[o_gc + uint64(3 * NPX) + p]
+                for ch in range(FUSED_CHANNELS, C):
+                    for i in range(TILE):
+                        p = base + i
+                        lanes[(6 + ch) * TILE + i] += st[B_W * NPX + p] * st[(B_GC + ch) * NPX + p]
+            i0 = px0 - x0
+            i1 = px1 - x0
+            j = start + k
+            r_m2d[j, 0] = _lane_sum(lanes, 0, i0, i1)
+            r_m2d[j, 1] = _lane_sum(lanes, 1, i0, i1)
+            r_conic[j, 0] = _lane_sum(lanes, 2, i0, i1)
+            r_conic[j, 1] = _lane_sum(lanes, 3, i0, i1)
+            r_conic[j, 2] = _lane_sum(lanes, 4, i0, i1)
+            r_opac[j] = _lane_sum(lanes, 5, i0, i1)
+            for ch in range(C):
+                r_color[j, ch] = _lane_sum(lanes, 6 + ch, i0, i1)
+
+
+@njit(cache=True, inline="always")
+def _lane_sum(lanes, f, i0, i1):
+    """Sum of quantity ``f``'s lanes [i0, i1) in index order (the lanes a Gaussian's box covers)."""
+    s = 0.0
+    for i in range(f * TILE + i0, f * TILE + i1):
+        s += lanes[i]
+    return s
 
 
 @njit(cache=True)

@@ -15,6 +15,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .compile_notice import announce_compiles
+
+announce_compiles()
+
 # SH constants (the 3DGS basis; kept equal to .sh)
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199

@@ -50,10 +50,10 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
     if m2d.shape[0] == 0:
         return TileBins(np.zeros(tiles_x * tiles_y + 1, np.int64), np.zeros(0, np.int32), tiles_x, tiles_y,
                         tile_size)
-    order = np.argsort(depths.detach().cpu().numpy(), kind="stable").astype(np.int64)
+    order = kernels.depth_order(np.ascontiguousarray(depths.detach().cpu().numpy()))
     with _KernelScope(chunk=0, items=m2d.shape[0]):
         rects = kernels.tile_rects(m2d, rad, tile_size, tiles_x, tiles_y)
-    offsets, ids = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+        offsets, ids = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
     return TileBins(offsets, ids, tiles_x, tiles_y, tile_size)
 
 

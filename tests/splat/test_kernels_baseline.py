@@ -1,0 +1,165 @@
+"""The box-clipped, Gaussian-outer tile kernels against the pixel-outer baseline they replace.
+
+Both get the same tile lists and inputs; the forward must give the same colours, transmittance,
+instance weights and last indices, and the backward the same gradient rows, on scenes built to hit
+the edges of the box rule: tiny and huge Gaussians, opacity at 0.99 and at the threshold, early
+termination, Gaussians across tile borders, non-positive-definite conics and image sizes that are
+not multiples of 16.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from symdrive_core.splat import kernels, kernels_baseline
+
+THRESHOLD = 1.0 / 255.0
+N_GROUPS = 3
+
+
+def scene_2d(n, width, height, seed, kind):
+    """2D Gaussians (means, conics, opacities, colours, groups, radii, depths) of one hard case."""
+    rng = np.random.default_rng(seed)
+    means = rng.uniform([-8.0, -8.0], [width + 8.0, height + 8.0], size=(n, 2))
+    log_sd = {"tiny": (-2.5, -0.5), "huge": (2.0, 4.0), "mixed": (-2.5, 3.5), "dense": (0.5, 2.0)}[kind]
+    sd = np.exp(rng.uniform(*log_sd, size=(n, 2)))
+    rho = rng.uniform(-0.95, 0.95, n)
+    cov = np.stack([sd[:, 0] ** 2, rho * sd[:, 0] * sd[:, 1], sd[:, 1] ** 2], 1)
+    det = cov[:, 0] * cov[:, 2] - cov[:, 1] ** 2
+    conics = np.stack([cov[:, 2] / det, -cov[:, 1] / det, cov[:, 0] / det], 1)
+    opac = rng.uniform(0.05, 1.0, n)
+    if kind == "dense":
+        opac = rng.uniform(0.9, 1.0, n)
+    # opacities on the rule's edges: at the alpha cap, just around the threshold, zero
+    edge = rng.random(n)
+    opac[edge < 0.08] = 0.99
+    opac[(edge >= 0.08) & (edge < 0.16)] = THRESHOLD * rng.uniform(0.999, 1.001, int(((edge >= 0.08) & (edge < 0.16)).sum()))
+    opac[(edge >= 0.16) & (edge < 0.18)] = 0.0
+    if kind == "mixed":  # some Gaussians whose conic the box rule cannot bound (full-tile fallback)
+        bad = rng.random(n) < 0.05
+        conics[bad, 1] = np.sqrt(conics[bad, 0] * conics[bad, 2]) * rng.uniform(1.0, 1.5, int(bad.sum()))
+    colors = rng.uniform(0.0, 1.0, (n, 4))
+    groups = rng.integers(-1, 3, n)
+    radii = np.ceil(3.33 * sd).astype(np.int64)
+    depths = rng.uniform(1.0, 50.0, n)
+    return means, conics, opac, colors, groups, radii, depths
+
+
+def bins_of(means, radii, depths, width, height):
+    tiles_x = (width + kernels.TILE - 1) // kernels.TILE
+    tiles_y = (height + kernels.TILE - 1) // kernels.TILE
+    rects = kernels.tile_rects(means, radii, kernels.TILE, tiles_x, tiles_y)
+    offsets, ids = kernels.bin_tiles(np.argsort(depths, kind="stable"), rects, tiles_x, tiles_y)
+    return offsets, ids, tiles_x
+
+
+def kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype):
+    return (means.astype(dtype), conics.astype(dtype), opac.astype(dtype), colors.astype(dtype), groups, N_GROUPS,
+            offsets, ids, width, height, tiles_x, kernels.TILE, THRESHOLD)
+
+
+def forward(module, args):
+    """Colour, T, instance weights and last index of one kernel module's forward."""
+    width, height, colors = args[8], args[9], args[3]
+    out = (np.zeros((height, width, colors.shape[1]), colors.dtype), np.ones((height, width)),
+           np.zeros((height, width, N_GROUPS), colors.dtype), np.zeros((height, width), np.int64))
+    module.rasterize_fwd(*args, *out)
+    return out
+
+
+def backward(module, args, fwd_out, seed):
+    """Gradient rows of one kernel module's backward for random output gradients."""
+    width, height, colors = args[8], args[9], args[3]
+    C, dtype, m = colors.shape[1], colors.dtype, args[7].shape[0]
+    rng = np.random.default_rng(seed + 100)
+    grads = (rng.normal(size=(height, width, C)).astype(dtype), rng.normal(size=(height, width)).astype(dtype),
+             rng.normal(size=(height, width, N_GROUPS)).astype(dtype))
+    rows = (np.zeros((m, 2), dtype), np.zeros((m, 3), dtype), np.zeros(m, dtype), np.zeros((m, C), dtype))
+    module.rasterize_bwd(*args, *fwd_out, *grads, *rows)
+    return rows
+
+
+CASES = [("tiny", 400, 61, 45), ("huge", 60, 64, 48), ("mixed", 300, 70, 50), ("dense", 400, 33, 47)]
+
+
+@pytest.mark.parametrize("kind,n,width,height", CASES)
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_kernels_match_baseline(kind, n, width, height, dtype, seed):
+    means, conics, opac, colors, groups, radii, depths = scene_2d(n, width, height, seed, kind)
+    offsets, ids, tiles_x = bins_of(means, radii, depths, width, height)
+    args = kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, dtype)
+    color, T, inst, last = forward(kernels, args)
+    base_out = forward(kernels_baseline, args)
+    color_b, T_b, inst_b, last_b = base_out
+    np.testing.assert_array_equal(last, last_b)  # the same Gaussians reached every pixel
+    tol = 1e-12 if dtype == np.float64 else 1e-6
+    np.testing.assert_allclose(T, T_b, atol=1e-12, rtol=0)
+    np.testing.assert_allclose(color, color_b, atol=tol, rtol=0)
+    np.testing.assert_allclose(inst, inst_b, atol=tol, rtol=0)
+    # both backward passes from the same forward outputs (float32 storage rounds each forward's own)
+    rows = backward(kernels, args, base_out, seed)
+    rows_b = backward(kernels_baseline, args, base_out, seed)
+    for got, want in zip(rows, rows_b):
+        scale = max(1.0, float(np.abs(want).max()))
+        np.testing.assert_allclose(got, want, atol=tol * scale, rtol=0)
+    # the scene exercises what it is meant to
+    assert ids.shape[0] > 0 and float(T.max()) > float(T.min())
+    if kind == "dense":
+        assert float((T <= 1e-2).mean()) > 0.5  # most pixels terminate early
+
+
+def test_box_holds_every_pixel_the_rule_keeps():
+    """Pixels outside a Gaussian's box have sigma above its limit (the rule skips them)."""
+    rng = np.random.default_rng(3)
+    for _ in range(2000):
+        sd = np.exp(rng.uniform(-2.0, 3.0, 2))
+        rho = rng.uniform(-0.999, 0.999)
+        cov = np.array([[sd[0] ** 2, rho * sd[0] * sd[1]], [rho * sd[0] * sd[1], sd[1] ** 2]])
+        a, b, c = np.linalg.inv(cov)[[0, 0, 1], [0, 1, 1]]
+        o = rng.choice([THRESHOLD * 1.0001, 0.5, 0.99])
+        lim = kernels.sigma_limit(o, THRESHOLD)
+        hx, hy = kernels.ellipse_half_extent(a, b, c, lim)
+        m = rng.uniform(-20.0, 20.0, 2)
+        px0, px1 = kernels.pixel_span(m[0], hx, -64, 64)
+        py0, py1 = kernels.pixel_span(m[1], hy, -64, 64)
+        py, px = np.mgrid[-64:64, -64:64]
+        dx = m[0] - (px + 0.5)
+        dy = m[1] - (py + 0.5)
+        sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+        inside = (px >= px0) & (px < px1) & (py >= py0) & (py < py1)
+        assert not np.any((sigma <= lim) & ~inside)
+        # and the box is tight: it is at most one pixel wider than the ellipse on each side
+        assert px1 - px0 <= 2 * hx + 2 and py1 - py0 <= 2 * hy + 2
+        assert math.isfinite(hx) and math.isfinite(hy)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_depth_order_is_a_stable_argsort(dtype):
+    rng = np.random.default_rng(5)
+    depths = np.concatenate([rng.uniform(0.01, 1e4, 5000), rng.integers(0, 20, 3000) * 0.5,  # many ties
+                             [0.0, -0.0, -3.0, np.inf, 1e-30, 5e30]]).astype(dtype)
+    rng.shuffle(depths)
+    np.testing.assert_array_equal(kernels.depth_order(depths), np.argsort(depths, kind="stable"))
+
+
+def test_parallel_binning_keeps_the_depth_order_in_every_tile():
+    means, conics, opac, colors, groups, radii, depths = scene_2d(3000, 200, 120, 4, "mixed")
+    offsets, ids, tiles_x = bins_of(means, radii, depths, 200, 120)
+    rects = kernels.tile_rects(means, radii, kernels.TILE, tiles_x, (120 + 15) // 16)
+    order = np.argsort(depths, kind="stable")
+    for t in range(offsets.shape[0] - 1):
+        tx, ty = t % tiles_x, t // tiles_x
+        inside = (rects[order, 0] <= tx) & (tx < rects[order, 1]) & (rects[order, 2] <= ty) & (ty < rects[order, 3])
+        np.testing.assert_array_equal(ids[offsets[t]:offsets[t + 1]], order[inside])
+
+
+def test_vector_exp_is_within_two_ulp_of_libm():
+    s = np.concatenate([np.random.default_rng(6).uniform(0.0, 8.0, 20000), np.linspace(0.0, 744.0, 5000),
+                        [0.0, 1e-300, 5e-324, 744.0]])
+    got = np.array([kernels.exp_neg(v) for v in s])
+    want = np.exp(-s)
+    assert np.all(np.abs(got - want) <= 2 * np.spacing(want))
