@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..diffusion.harmonize import CROP_MARGIN
 from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
 from .stages import StageOptions
@@ -189,7 +190,6 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
     the scene; seconds per harmonized frame."""
     from dataclasses import replace
 
-    from ..diffusion.harmonize import CROP_MARGIN
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
     from ..optim.finetune import FinetuneConfig
@@ -315,7 +315,9 @@ WHY_DEFAULTS = {
                        "steps measure worse with the shipped restorer, whose errors add up per step.",
     "harmonize samples": f"{DEFAULTS.harmonize_samples}: the mean of harmonizations cancels most of the small "
                          "restorer's grain; 8 gains little more for twice the time.",
-    "harmonize crop margin": "CROP_MARGIN_WHY",
+    "harmonize crop margin": f"{CROP_MARGIN} px of context around the region: from 16 to 64 px the masked PSNR "
+                             "stays within 0.1 dB of the whole image's at a fraction of its time; 16 px is "
+                             "faster still but leaves the network less of the scene around the vehicle.",
     "fine-tune iterations": f"{DEFAULTS.finetune_steps}: past it the masked PSNR stops rising while time grows "
                             "linearly.",
 }
