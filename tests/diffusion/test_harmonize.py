@@ -107,3 +107,85 @@ def test_vae_space_uses_flux_normalisation():
     _, vae = tiny_flux()
     space = VAESpace(vae)
     assert (space.scale, space.shift, space.factor, space.channels) == (0.3611, 0.1159, 2, 4)
+
+
+def test_crop_boxes_grow_align_and_clip_at_the_image_edges():
+    from symdrive_core.diffusion.harmonize import crop_boxes
+
+    region = np.zeros((40, 64), bool)
+    region[13:20, 21:30] = True
+    assert crop_boxes(region, 5, align=4) == [(8, 28, 16, 36)]  # 13-5 -> 8, 20+5 -> 28
+    assert crop_boxes(region, 0, align=1) == [(13, 20, 21, 30)]
+    region[:] = False
+    region[0:3, 60:64] = True  # touches the top and right edges
+    (y0, y1, x0, x1), = crop_boxes(region, 6, align=8)
+    assert (y0, y1, x0, x1) == (0, 16, 48, 64)  # the end is clipped to the image, not to a multiple
+    assert crop_boxes(region, None) == [(0, 40, 0, 64)]
+    assert crop_boxes(np.zeros((40, 64), bool), 6) == []
+
+
+def test_crop_boxes_split_distant_parts_and_keep_near_ones_together():
+    from symdrive_core.diffusion.harmonize import crop_boxes
+
+    region = np.zeros((64, 256), bool)
+    region[30:34, 10:20] = True
+    region[30:34, 200:210] = True
+    assert crop_boxes(region, 8, align=8) == [(16, 48, 0, 32), (16, 48, 192, 224)]
+    region[28:36, 20:200] = True  # a bridge: one part
+    assert crop_boxes(region, 8, align=8) == [(16, 48, 0, 224)]
+    region = np.zeros((64, 64), bool)
+    region[10, 10] = region[40, 40] = True  # apart on both axes, but the union box is no larger
+    assert crop_boxes(region, 16, align=8) == [(0, 64, 0, 64)]
+
+
+def test_crop_equals_the_whole_image_when_the_margin_covers_it():
+    image, region = scene(4, 40, 48)
+    kw = dict(steps=4, n_start=1, seed=2, samples=2)
+    full = harmonize(tiny_builtin(), image, region, crop_margin=None, **kw)
+    assert np.array_equal(harmonize(tiny_builtin(), image, region, crop_margin=1000, **kw), full)
+    everywhere = np.ones_like(region)
+    assert np.array_equal(harmonize(tiny_builtin(), image, everywhere, crop_margin=4, **kw),
+                          harmonize(tiny_builtin(), image, everywhere, crop_margin=None, **kw))
+
+
+@pytest.mark.parametrize("max_memory_gib", [None, 1e-4])
+def test_cropped_regions_at_the_border_and_apart_change_only_their_pixels(max_memory_gib):
+    rng = np.random.default_rng(5)
+    image = rng.random((48, 160, 3)).astype(np.float32)
+    region = np.zeros((48, 160), bool)
+    region[0:9, 2:14] = True  # touches the top edge
+    region[30:48, 140:160] = True  # the bottom-right corner
+    net = tiny_builtin()
+    calls = []
+    velocity = net.velocity
+    net.velocity = lambda z, *a: calls.append(tuple(z.shape[-2:])) or velocity(z, *a)
+    out = harmonize(net, image, region, steps=4, n_start=1, samples=2, crop_margin=8,
+                    max_memory_gib=max_memory_gib, tile=16, tile_overlap=4)
+    assert np.array_equal(out[~region], image[~region])
+    assert not np.allclose(out[region], image[region])
+    assert max(h * w for h, w in calls) < 48 * 160 // 4  # two small crops (or their tiles), never the frame
+
+
+def test_crop_keeps_the_whole_images_time_shift_and_conditions_on_the_crop():
+    image, region = scene(6, 64, 96)
+    y = np.full_like(image, 0.25)
+
+    class Shifted(OracleRestorer):
+        shapes = []
+
+        def time_shift(self, shape):
+            self.shapes.append(tuple(shape))
+            return 0.5
+
+        def velocity(self, z_t, t, cond_left, cond_right):
+            self.calls.append((cond_left.clone(), cond_right.clone()))
+            return (z_t - self.y[..., : z_t.shape[-2], : z_t.shape[-1]]) / t.reshape(-1, 1, 1, 1)
+
+    oracle = Shifted(torch.from_numpy(y).permute(2, 0, 1)[None])
+    out = harmonize(oracle, image, region, steps=5, n_start=0, samples=3, crop_margin=2)
+    assert oracle.shapes == [(3, 3, 64, 96)]
+    left, right = oracle.calls[0]
+    assert torch.equal(left, right) and left.shape[-2:] == (13, 17)  # region [6:15, 9:22] grown by 2
+    assert torch.equal(left[0], torch.from_numpy(image[4:17, 7:24]).permute(2, 0, 1) * 2 - 1)
+    assert np.allclose(out[region], 0.25, atol=1e-5)
+    assert np.array_equal(out[~region], image[~region])
