@@ -199,6 +199,7 @@ def run_lateral_restoration(
     from tqdm import tqdm
 
     targets = _targets(manifest, frames)
+    truths = _lane_truths(manifest, targets)
     steps = {m: method_step(m) for m in methods}
     render = SplatRenderer(gaussians)
     cam = lateral_camera(manifest)
@@ -214,7 +215,7 @@ def run_lateral_restoration(
         chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
         for v in sorted(views, key=lambda v: abs(v.offset_m)):
             gt = read_image(manifest.resolve(v.image), channels=3)
-            lanes = _lane_truth(manifest, v, gt, ceilings)
+            lanes = _with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
             for method, step in steps.items():
                 before, t0 = chain.samples, time.perf_counter()
                 img = chain.restore(v.offset_m, step)
@@ -243,12 +244,17 @@ def _targets(manifest: Manifest, frames: list[int] | None) -> list:
     return targets
 
 
-def _lane_truth(manifest: Manifest, view, gt: np.ndarray, ceilings: dict[float, list[float]]):
-    """The view's lane truth (None without a lane mask); records the segmenter's IoU on the
-    Cycles image itself, the ceiling of the view's offset."""
-    lanes = view.lane_truth(manifest)
+def _lane_truths(manifest: Manifest, targets: list) -> dict:
+    """(offset, frame) -> lane truth of every target view that has a lane mask, all read before
+    any view is rendered or restored (a missing mask stops the run before its work)."""
+    return {(v.offset_m, v.frame): v.lane_truth(manifest) for v in targets if v.lanes is not None}
+
+
+def _with_ceiling(lanes, gt: np.ndarray, offset: float, ceilings: dict[float, list[float]]):
+    """``lanes`` (None passes through), after recording the segmenter's IoU on the Cycles
+    image itself: the ceiling at ``offset``."""
     if lanes is not None:
-        ceilings.setdefault(view.offset_m, []).append(lanes.iou(gt))
+        ceilings.setdefault(offset, []).append(lanes.iou(gt))
     return lanes
 
 
@@ -287,10 +293,13 @@ def score_gaussians(
     render = SplatRenderer(gaussians)
     scores: dict[tuple[float, str], list] = {}
     ceilings: dict[float, list[float]] = {}
-    for v in _targets(manifest, frames):
+    targets = _targets(manifest, frames)
+    truths = _lane_truths(manifest, targets)
+    for v in targets:
         img = render(v.K, v.world_to_camera, v.width, v.height)
         gt = read_image(manifest.resolve(v.image), channels=3)
-        scores.setdefault((v.offset_m, method), []).append(_score(img, gt, _lane_truth(manifest, v, gt, ceilings)))
+        lanes = _with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
+        scores.setdefault((v.offset_m, method), []).append(_score(img, gt, lanes))
     return _rows(scores, {}, ceilings)
 
 
