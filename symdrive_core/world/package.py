@@ -62,12 +62,13 @@ class LateralView:
         return None if self.lanes is None else lane_truth(manifest, self.lanes, self.K, self.camera_to_world)
 
 
-def lane_masks(manifest: Manifest) -> dict[tuple[float, int], str]:
-    """(offset_m, frame) -> lane mask path: offset 0.0 for the recorded views."""
+def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
+    """(camera, offset_m, frame) -> lane mask path: offset 0.0 for the recorded views."""
     lanes = (manifest.ground_truth or {}).get("lanes", {})
-    out = {(0.0, int(k)): rel for k, rel in lanes.get("recorded", {}).items()}
+    camera = lanes.get("camera", manifest.cameras[0].name)
+    out = {(camera, 0.0, int(k)): rel for k, rel in lanes.get("recorded", {}).items()}
     for e in lanes.get("lateral", []):
-        out.update({(float(e["offset_m"]), int(k)): rel for k, rel in e["frames"].items()})
+        out.update({(e.get("camera", camera), float(e["offset_m"]), int(k)): rel for k, rel in e["frames"].items()})
     return out
 
 
@@ -93,7 +94,7 @@ def lateral_views(manifest: Manifest) -> list[LateralView]:
             cf = cam.frames[int(key)]
             c2w = conventions.lateral_shift(cf.camera_to_world, off)
             out.append(LateralView(off, int(key), cf.K, c2w, conventions.invert_rigid(c2w), rel,
-                                   cam.width, cam.height, masks.get((off, int(key)))))
+                                   cam.width, cam.height, masks.get((cam.name, off, int(key)))))
     return out
 
 

@@ -19,7 +19,7 @@ LATERAL = [v for v in lateral_views(MANIFEST) if v.frame in (2, 12, 22) and abs(
 
 def _recorded(i: int):
     cf = MANIFEST.cameras[0].frames[i]
-    return (lane_truth(MANIFEST, lane_masks(MANIFEST)[(0.0, i)], cf.K, cf.camera_to_world),
+    return (lane_truth(MANIFEST, lane_masks(MANIFEST)[("front", 0.0, i)], cf.K, cf.camera_to_world),
             read_image(MANIFEST.resolve(cf.image), channels=3))
 
 
@@ -29,8 +29,8 @@ def _lateral(v):
 
 def test_every_ground_truth_view_has_a_lane_mask():
     masks = lane_masks(MANIFEST)
-    assert all((0.0, i) in masks for i in range(len(MANIFEST.frames)))
-    assert all((v.offset_m, v.frame) in masks for v in lateral_views(MANIFEST))
+    assert all(("front", 0.0, i) in masks for i in range(len(MANIFEST.frames)))
+    assert all(("front", v.offset_m, v.frame) in masks for v in lateral_views(MANIFEST))
     assert len(LATERAL) == 12 and all(v.lanes is not None for v in LATERAL)
 
 
@@ -56,7 +56,7 @@ def test_a_missing_lane_mask_stops_restore_evaluate_with_exit_2(tmp_path, capsys
 
     pkg = tmp_path / "pkg"
     shutil.copytree(DEMO_PACKAGE, pkg, ignore=shutil.ignore_patterns("output"))
-    gone = lane_masks(MANIFEST)[(0.5, 12)]
+    gone = lane_masks(MANIFEST)[("front", 0.5, 12)]
     (pkg / gone).unlink()
     copy = load_manifest(pkg)
     with pytest.raises(InputError, match="file not found"):
