@@ -1,4 +1,4 @@
-"""Image quality metrics: PSNR, SSIM (3DGS flavour), masked variants, Frechet distance.
+"""Image quality metrics: PSNR, SSIM (3DGS flavour), masked variants, mask IoU, Frechet distance.
 
 SSIM follows the 3DGS evaluation code: 11x11 Gaussian window, sigma 1.5, C1 = 0.01^2,
 C2 = 0.03^2, zero padding ("same" convolution), mean over channels and pixels. Other
@@ -89,6 +89,16 @@ def bbox_crop(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
     h, w = np.asarray(mask).shape[:2]
     return (slice(max(0, ys.min() - margin), min(h, ys.max() + 1 + margin)),
             slice(max(0, xs.min() - margin), min(w, xs.max() + 1 + margin)))
+
+
+def mask_iou(pred: np.ndarray, truth: np.ndarray) -> float:
+    """Intersection over union of two boolean masks of one shape. Two empty masks agree
+    perfectly (1.0): a view with no lane paint is scored right when none is found."""
+    pred, truth = np.asarray(pred, dtype=bool), np.asarray(truth, dtype=bool)
+    if pred.shape != truth.shape:
+        raise ValueError(f"mask_iou: shapes differ, {pred.shape} vs {truth.shape}")
+    union = int(np.count_nonzero(pred | truth))
+    return 1.0 if union == 0 else int(np.count_nonzero(pred & truth)) / union
 
 
 def frechet_distance(feats_a: np.ndarray, feats_b: np.ndarray) -> float:

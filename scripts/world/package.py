@@ -6,6 +6,8 @@ Layout (paths relative to the package):
     gt/train/000000.png          training drive (also the images of camera "front")
     gt/depth/000000.exr          OpenCV z-depth in metres, float; 0 where the ray meets the sky
     gt/lateral/+0.5/000000.png   the frame's camera moved 0.5 m to its right (lateral_shift)
+    gt/lanes/recorded/000000.png lane-marking mask of a training-drive view (world.lanes, exact)
+    gt/lanes/lateral/+0.5/000000.png  the same for a lateral view
     gt/insertion/00/with.png     vehicle placed in the scene (true light and shadow)
     gt/insertion/00/mask.png     its visible mask (object-index pass, exact)
     gt/insertion/00/shadow.png   its hard-shadow region (sunny scenes only)
@@ -28,7 +30,7 @@ from symdrive_core.scene import Actor, Camera, CameraFrame, Effects, Frame, Mani
 from symdrive_core.world.projection import colour_points
 from symdrive_core.world.sampling import sample_surface
 
-from . import drive, render
+from . import drive, lanes, render
 from .assets import export_car
 from .insertion import place_object, placement_pose, shadow_mask
 from .meshdata import scene_triangles
@@ -58,6 +60,8 @@ class PackageWriter:
         self.train_images: dict[int, np.ndarray] = {}
         self.train_depths: dict[int, np.ndarray] = {}
         self.lateral: dict[float, dict[str, str]] = {}
+        self.lanes_recorded: dict[int, str] = {}
+        self.lanes_lateral: dict[float, dict[int, str]] = {}
         self.insertions: list[dict] = []
         self.render_seconds: list[float] = []
         self.assets = self._make_assets()
@@ -98,12 +102,19 @@ class PackageWriter:
         write_image(self.root / f"gt/train/{i:06d}.png", out["rgb"])
         write_image(self.root / f"gt/depth/{i:06d}.exr", out["depth"], dtype="float")
         self.train_images[i], self.train_depths[i] = out["rgb"], out["depth"]
+        self.lanes_recorded[i] = self._lane_mask(self.poses[i], lanes.recorded_path(i))
+
+    def _lane_mask(self, c2w, rel: str) -> str:
+        write_mask(self.root / rel, lanes.lane_mask(self.cam, c2w))
+        return rel
 
     def _lateral(self, i: int, offset: float) -> None:
-        out = self._render(conventions.lateral_shift(self.poses[i], offset))
+        c2w = conventions.lateral_shift(self.poses[i], offset)
+        out = self._render(c2w)
         rel = f"gt/lateral/{lateral_dir(offset)}/{i:06d}.png"
         write_image(self.root / rel, out["rgb"])
         self.lateral.setdefault(offset, {})[str(i)] = rel
+        self.lanes_lateral.setdefault(offset, {})[i] = self._lane_mask(c2w, lanes.lateral_path(lateral_dir(offset), i))
 
     def _insert(self, k: int, frame: int, kind: str) -> None:
         obj, info = self.assets[kind]
@@ -176,6 +187,7 @@ class PackageWriter:
                          "frames": dict(sorted(self.lateral[off].items(), key=lambda kv: int(kv[0])))}
                         for off in sorted(self.lateral)],
             "insertion": self.insertions,
+            "lanes": lanes.ground_truth_block("front", self.lanes_recorded, self.lanes_lateral),
             "road": {"centerline": np.round(self.street.centreline(), 4).tolist(), "lanes": LANES,
                      "lane_width": LANE_WIDTH},
             "generator": {

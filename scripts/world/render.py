@@ -104,7 +104,8 @@ def _pass(ch: dict, suffixes: tuple[str, ...]) -> np.ndarray:
 
 def render(cam_obj, c2w_opencv: np.ndarray) -> dict[str, np.ndarray]:
     """Render from an OpenCV camera pose: ``rgb`` sRGB [H,W,3], ``depth`` OpenCV z in metres
-    [H,W] (0 = sky), ``index`` object pass index [H,W] int."""
+    [H,W] (0 = sky), ``index`` object pass index [H,W] int, ``alpha`` [H,W] (the pixel's
+    coverage by objects that are not holdouts)."""
     cam_obj.matrix_world = Matrix(conventions.opencv_camera_to_blender(c2w_opencv).tolist())
     scene = bpy.context.scene
     with tempfile.TemporaryDirectory(prefix="symdrive_cycles_") as tmp:
@@ -116,4 +117,6 @@ def render(cam_obj, c2w_opencv: np.ndarray) -> dict[str, np.ndarray]:
     depth = _pass(ch, ("Depth.Z",)).copy()
     depth[~(depth < SKY_DEPTH)] = 0.0
     index = np.rint(_pass(ch, ("IndexOB.X", "IndexOB.R", "Object Index.X"))).astype(np.int32)
-    return {"rgb": conventions.linear_to_srgb(rgb).astype(np.float32), "linear": rgb, "depth": depth, "index": index}
+    alpha = _pass(ch, ("Combined.A",))
+    return {"rgb": conventions.linear_to_srgb(rgb).astype(np.float32), "linear": rgb, "depth": depth, "index": index,
+            "alpha": alpha}

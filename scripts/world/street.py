@@ -26,6 +26,7 @@ ROAD_HALF = LANE_WIDTH * LANES / 2 + 2.2  # lanes + parking strip
 KERB_H = 0.15
 SIDEWALK = 3.0
 X_START, X_END = -30.0, 230.0
+MARKING = "lane_marking"  # custom property set on every lane-marking object (gt/lanes masks)
 PARK_OFFSET = LANE_WIDTH + 1.1  # parked cars' centre, from the centreline
 PAINTS = [(0.6, 0.05, 0.04), (0.05, 0.12, 0.4), (0.75, 0.75, 0.73), (0.03, 0.03, 0.035),
           (0.35, 0.36, 0.38), (0.1, 0.3, 0.12), (0.7, 0.45, 0.08), (0.5, 0.52, 0.55)]
@@ -77,8 +78,10 @@ def _road(street: Street, col):
     objs = [strip("road", path, normals, [-ROAD_HALF, 0.0, ROAD_HALF], [0, 0, 0], mats["asphalt"], col)]
     for side in (-1, 1):
         edge = side * LANE_WIDTH * LANES / 2
-        objs.append(strip(f"edge_line_{side}", path, normals, [edge - 0.08, edge + 0.08],
-                          [0.004, 0.004], mats["paint"], col))
+        line = strip(f"edge_line_{side}", path, normals, [edge - 0.08, edge + 0.08], [0.004, 0.004],
+                     mats["paint"], col)
+        line[MARKING] = True
+        objs.append(line)
         k0, k1 = side * ROAD_HALF, side * (ROAD_HALF + 0.15)
         lateral, heights = ([k0, k0, k1], [0.0, KERB_H, KERB_H]) if side > 0 else ([k1, k0, k0], [KERB_H, KERB_H, 0.0])
         objs.append(strip(f"kerb_{side}", path, normals, lateral, heights, mats["kerb"], col))
@@ -88,7 +91,9 @@ def _road(street: Street, col):
         objs.append(strip(f"verge_{side}", path[::4], normals[::4], [v0, v1], [KERB_H, KERB_H], mats["verge"], col))
     for x0 in np.arange(X_START, X_END - 3.0, 8.0):  # dashed centre line: 3 m on, 5 m off
         p, n = _path(street, x0, x0 + 3.0, 0.5)
-        objs.append(strip(f"dash_{int(x0 - X_START)}", p, n, [-0.07, 0.07], [0.004, 0.004], mats["paint"], col))
+        dash = strip(f"dash_{int(x0 - X_START)}", p, n, [-0.07, 0.07], [0.004, 0.004], mats["paint"], col)
+        dash[MARKING] = True
+        objs.append(dash)
     return objs
 
 

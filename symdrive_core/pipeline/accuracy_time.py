@@ -21,7 +21,7 @@ class Setting:
     knob: str
     value: str
     default: bool
-    measure: Callable[[], dict]  # -> {"psnr": ..., "ssim": ..., optional "per": "frame"} ; real work
+    measure: Callable[[], dict]  # -> {"psnr", "ssim", optional "lane_iou" and "per": "frame"}; real work
 
 
 def run_settings(settings: list[Setting], progress: bool = True) -> list[dict]:
@@ -44,10 +44,12 @@ def run_settings(settings: list[Setting], progress: bool = True) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
-    lines = ["| knob | setting | PSNR (dB) | SSIM | seconds | per | Pareto |", "|---|---|---|---|---|---|---|"]
+    lines = ["| knob | setting | PSNR (dB) | SSIM | lane IoU | seconds | per | Pareto |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         name = f"**{r['value']}** (default)" if r["default"] else r["value"]
-        lines.append(f"| {r['knob']} | {name} | {r['psnr']:.2f} | {r.get('ssim', float('nan')):.4f} | "
+        lane = f"{r['lane_iou']:.1f}" if "lane_iou" in r else ""
+        lines.append(f"| {r['knob']} | {name} | {r['psnr']:.2f} | {r.get('ssim', float('nan')):.4f} | {lane} | "
                      f"{r['seconds']:.3f} | {r.get('per', 'run')} | {'yes' if r['pareto'] else ''} |")
     return "\n".join(lines)
 

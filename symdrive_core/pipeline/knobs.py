@@ -103,6 +103,13 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     ]
 
 
+def lane_iou(rows: list[dict]) -> dict:
+    """Mean ``lane_iou`` of lateral rows (IoU points), where the rows carry it."""
+    if rows and all("lane_iou" in r for r in rows):
+        return {"lane_iou": float(np.mean([r["lane_iou"] for r in rows]))}
+    return {}
+
+
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Sampler steps / ``N_start`` and the auto-regressive step ``d`` on lateral views."""
     from ..diffusion.restore import run_lateral_restoration, score_gaussians
@@ -116,7 +123,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
         t0 = time.perf_counter()
         rows = score_gaussians(scoped, gaussians, "raw_3dgs", frames)
         return {"psnr": float(np.mean([r["psnr"] for r in rows])), "ssim": float(np.mean([r["ssim"] for r in rows])),
-                "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
+                **lane_iou(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
 
     def measure(method: str, steps: int, n_start: int, samples: int = DEFAULTS.samples):
         def run() -> dict:
@@ -125,7 +132,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
                                           sampler=SamplerConfig(steps, n_start, DEFAULTS.seed, samples), progress=False)
             views = len(res.views.get(method, []))
             return {"psnr": float(np.mean([r["psnr"] for r in res.rows])),
-                    "ssim": float(np.mean([r["ssim"] for r in res.rows])),
+                    "ssim": float(np.mean([r["ssim"] for r in res.rows])), **lane_iou(res.rows),
                     "seconds": (time.perf_counter() - t0) / max(views, 1), "per": "view"}
         return run
 

@@ -400,6 +400,18 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
             camera(e["camera"], f"ground_truth.lateral[{li}].camera")
         for k in e["frames"]:
             frame(k, f"ground_truth.lateral[{li}].frames.{k}")
+    lanes = gt.get("lanes", {})
+    if lanes and "road" not in gt:
+        rd.fail("ground_truth.lanes", "lane masks are scored inside the road: ground_truth.road is missing")
+    if "camera" in lanes:
+        camera(lanes["camera"], "ground_truth.lanes.camera")
+    for k in lanes.get("recorded", {}):
+        frame(k, f"ground_truth.lanes.recorded.{k}")
+    for li, e in enumerate(lanes.get("lateral", [])):
+        if "camera" in e:
+            camera(e["camera"], f"ground_truth.lanes.lateral[{li}].camera")
+        for k in e["frames"]:
+            frame(k, f"ground_truth.lanes.lateral[{li}].frames.{k}")
     for ii, e in enumerate(gt.get("insertion", [])):
         if "camera" in e:
             camera(e["camera"], f"ground_truth.insertion[{ii}].camera")

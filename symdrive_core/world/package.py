@@ -9,6 +9,10 @@
       "insertion": [{"actor", "asset", "kind", "wlh", "pose": {"translation", "rotation"},
                      "camera", "frame", "with", "without", "mask", "shadow_mask" (or null),
                      "mask_pixels", "shadow_pixels"}, ...],
+      "lanes": {"camera": "front", "definition": "...",   # exact lane-marking masks (lane IoU)
+                "recorded": {"0": "gt/lanes/recorded/000000.png", ...},
+                "lateral": [{"offset_m": 0.5, "camera": "front",
+                             "frames": {"0": "gt/lanes/lateral/+0.5/000000.png", ...}}, ...]},
       "road": {"centerline": [[x, y, z], ...], "lanes": 2, "lane_width": 3.5},
       "generator": {...}                    # settings and Cycles timings
     }
@@ -51,10 +55,37 @@ class LateralView:
     image: str  # ground truth, relative to the package
     width: int
     height: int
+    lanes: str | None = None  # its exact lane-marking mask, relative to the package
+
+    def lane_truth(self, manifest: Manifest):
+        """The view's :class:`~symdrive_core.lane_paint.LaneTruth` (None without a lane mask)."""
+        return None if self.lanes is None else lane_truth(manifest, self.lanes, self.K, self.camera_to_world)
+
+
+def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
+    """(camera, offset_m, frame) -> lane mask path: offset 0.0 for the recorded views."""
+    lanes = (manifest.ground_truth or {}).get("lanes", {})
+    camera = lanes.get("camera", manifest.cameras[0].name)
+    out = {(camera, 0.0, int(k)): rel for k, rel in lanes.get("recorded", {}).items()}
+    for e in lanes.get("lateral", []):
+        out.update({(e.get("camera", camera), float(e["offset_m"]), int(k)): rel for k, rel in e["frames"].items()})
+    return out
+
+
+def lane_truth(manifest: Manifest, mask: str, K, camera_to_world):
+    """The lane mask ``mask`` of the camera (K, camera_to_world) with the road region it is scored in."""
+    from ..io.images import read_mask
+    from ..lane_paint import LaneTruth
+    from ..traffic.road import road_from_json
+
+    road = road_from_json(manifest.ground_truth["road"], manifest.path or manifest.root)
+    return LaneTruth.for_camera(read_mask(manifest.resolve(mask)) > 0.5, K, camera_to_world, road)
 
 
 def lateral_views(manifest: Manifest) -> list[LateralView]:
-    """Every lateral ground-truth image with its (shifted) camera, in offset then frame order."""
+    """Every lateral ground-truth image with its (shifted) camera and lane mask (where the
+    package has one), in offset then frame order."""
+    masks = lane_masks(manifest)
     out = []
     for entry in (manifest.ground_truth or {}).get("lateral", []):
         cam = manifest.camera(entry.get("camera", manifest.cameras[0].name))
@@ -63,7 +94,7 @@ def lateral_views(manifest: Manifest) -> list[LateralView]:
             cf = cam.frames[int(key)]
             c2w = conventions.lateral_shift(cf.camera_to_world, off)
             out.append(LateralView(off, int(key), cf.K, c2w, conventions.invert_rigid(c2w), rel,
-                                   cam.width, cam.height))
+                                   cam.width, cam.height, masks.get((cam.name, off, int(key)))))
     return out
 
 

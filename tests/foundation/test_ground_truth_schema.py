@@ -72,6 +72,15 @@ CASES = [
      lambda gt: gt["lateral"][1]["frames"].update({"99": "a.png"})),
     ("ground_truth.insertion[2].camera", "no camera", lambda gt: gt["insertion"][2].update(camera="back")),
     ("ground_truth.train_frames[1]", ">= 0", lambda gt: gt["train_frames"].__setitem__(1, -1)),
+    ("ground_truth.lanes.recorde", "did you mean 'recorded'?",
+     lambda gt: gt["lanes"].update(recorde=gt["lanes"].pop("recorded"))),
+    ("ground_truth.lanes.lateral[0].offset", "did you mean 'offset_m'?",
+     lambda gt: gt["lanes"]["lateral"][0].update(offset=gt["lanes"]["lateral"][0].pop("offset_m"))),
+    ("ground_truth.lanes.recorded.x", "frame indices", lambda gt: gt["lanes"]["recorded"].update(x="a.png")),
+    ("ground_truth.lanes.lateral[4].frames.99", "out of range",
+     lambda gt: gt["lanes"]["lateral"][4]["frames"].update({"99": "a.png"})),
+    ("ground_truth.lanes.camera", "no camera", lambda gt: gt["lanes"].update(camera="back")),
+    ("ground_truth.lanes", "ground_truth.road is missing", lambda gt: gt.pop("road")),
 ]
 
 
@@ -84,7 +93,7 @@ def test_a_wrong_field_is_an_error_naming_it(tmp_path, field, message, edit):
 
 @pytest.mark.parametrize("field, message, edit", CASES, ids=[c[0] for c in CASES])
 def test_jsonschema_refuses_the_same_where_the_schema_can_say_it(field, message, edit):
-    if "out of range" in message or "no camera" in message:
+    if "out of range" in message or "no camera" in message or "road is missing" in message:
         pytest.skip("cross-field checks are the loader's alone")
     assert _schema_errors(_demo_with(edit))
 

@@ -7,9 +7,9 @@ import pytest
 from symdrive_core.cli import main
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import read_splats
-from symdrive_core.pipeline.accuracy_time import Setting, run_settings, write_outputs
+from symdrive_core.pipeline.accuracy_time import Setting, format_table, run_settings, write_outputs
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
-from symdrive_core.pipeline.knobs import Budget, renderer_settings, shadow_settings, spread
+from symdrive_core.pipeline.knobs import Budget, lane_iou, renderer_settings, shadow_settings, spread
 from symdrive_core.scene import load_manifest
 
 
@@ -23,6 +23,16 @@ def test_pareto_marks_and_outputs(tmp_path):
     assert data["rows"] == rows and data["defaults"] == {"k": "why b"}
     assert "**b** (default)" in paths["md"].read_text() and "why b" in paths["md"].read_text()
     assert read_image(paths["png"]).ndim == 3
+
+
+def test_lane_iou_is_a_column_where_the_rows_carry_it():
+    assert lane_iou([{"lane_iou": 10.0}, {"lane_iou": 20.0}]) == {"lane_iou": 15.0}
+    assert lane_iou([{"lane_iou": 10.0}, {"psnr": 20.0}]) == {}  # a package without lane masks
+    settings = [Setting("d", "0.5 m", True, lambda: {"seconds": 1.0, "psnr": 21.0, "lane_iou": 3.44}),
+                Setting("aa", "off", True, lambda: {"seconds": 1.0, "psnr": 30.0})]
+    table = format_table(run_settings(settings, progress=False)).splitlines()
+    assert "| lane IoU |" in table[0]
+    assert "| 3.4 |" in table[2] and "| 30.00 | nan |  |" in table[3]
 
 
 def test_spread_picks_inside_the_sequence():

@@ -1,7 +1,8 @@
-"""The generator end to end at a tiny size (Cycles renders six 48x27 frames)."""
+"""The generator end to end at a tiny size (Cycles renders six 48x27 frames and their lane masks)."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -107,3 +108,31 @@ def test_point_cloud_lies_near_the_depth_maps(package):
     pts, cols = read_points(package.resolve(package.background_points))
     assert len(pts) > 100 and cols.min() >= 0 and cols.max() <= 1
     assert np.abs(pts[:, 2]).max() < 40  # on the scene, not on the sky
+
+
+def test_every_view_has_a_lane_mask_on_its_painted_lines(package):
+    lanes = package.ground_truth["lanes"]
+    assert sorted(lanes["recorded"]) == ["0", "1", "2"]
+    assert [(e["offset_m"], sorted(e["frames"])) for e in lanes["lateral"]] == [(1.0, ["0", "2"])]
+    cam = package.cameras[0]
+    for key, rel in lanes["recorded"].items():
+        mask = read_mask(package.resolve(rel)) > 0.5
+        value = read_image(package.resolve(cam.frames[int(key)].image), channels=3).max(axis=2)
+        assert mask.shape == (27, 48) and mask.any()
+        assert value[mask].mean() > value[mask.shape[0] // 2:].mean() + 0.1  # paint outshines the lower half
+
+
+def test_lane_masks_of_an_existing_package_match_make_worlds(package, tmp_path):
+    """``make_lane_masks.py`` rebuilds the street of a package and writes the same masks."""
+    copy = tmp_path / "pkg"
+    shutil.copytree(package.root, copy)
+    shutil.rmtree(copy / "gt" / "lanes")
+    data = json.loads((copy / "manifest.json").read_text(encoding="utf-8"))
+    written = data["ground_truth"].pop("lanes")
+    (copy / "manifest.json").write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    subprocess.run([sys.executable, str(ROOT / "scripts" / "make_lane_masks.py"), str(copy)],
+                   check=True, capture_output=True, env=_env())
+    again = load_manifest(copy).ground_truth["lanes"]
+    assert again == written
+    for rel in [*written["recorded"].values(), *[f for e in written["lateral"] for f in e["frames"].values()]]:
+        assert np.array_equal(read_mask(copy / rel), read_mask(package.resolve(rel)))
