@@ -348,15 +348,16 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     import time
 
-    from ..diffusion.restore import run_lateral_restoration, score_gaussians
+    from ..diffusion.restore import run_lateral_restoration
     from ..io.ply import write_splats
+    from ..optim.evaluate import evaluate_lateral
 
     methods = ("single_view", "ar_d0.5", "ar_d1.0")
     t0 = time.perf_counter()
     result = run_lateral_restoration(
         manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames, progress=not args.quiet
     )
-    rows = score_gaussians(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
+    rows = evaluate_lateral(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
     metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
     if args.refine:
         from ..diffusion.refine import RefineConfig, refine_gaussians
@@ -376,6 +377,6 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
         control, control_stats = refine_gaussians(manifest, gaussians, [], cfg, progress=not args.quiet)
         metrics["refine"] = {**stats, "step_m": args.step, "frames": sorted({v.frame for v in views}), "offsets_m": list(args.offsets),
                              "restore_seconds": restore_seconds, "control_seconds": control_stats["seconds"]}
-        metrics["lateral"] += score_gaussians(manifest, refined, "refined", args.frames)
-        metrics["lateral"] += score_gaussians(manifest, control, "refined_recorded_only", args.frames)
+        metrics["lateral"] += evaluate_lateral(manifest, refined, "refined", args.frames)
+        metrics["lateral"] += evaluate_lateral(manifest, control, "refined_recorded_only", args.frames)
     return metrics

@@ -22,7 +22,7 @@ import numpy as np
 from .. import conventions
 from ..gaussians import Gaussians
 from ..io.images import read_image
-from ..metrics import psnr, ssim
+from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
 from ..scene import Manifest
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
@@ -198,8 +198,8 @@ def run_lateral_restoration(
     method, score it against the Cycles image, and keep the restored views."""
     from tqdm import tqdm
 
-    targets = _targets(manifest, frames)
-    truths = _lane_truths(manifest, targets)
+    targets = lateral_targets(manifest, frames)
+    truths = lane_truths(manifest, targets)
     steps = {m: method_step(m) for m in methods}
     render = SplatRenderer(gaussians)
     cam = lateral_camera(manifest)
@@ -215,7 +215,7 @@ def run_lateral_restoration(
         chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
         for v in sorted(views, key=lambda v: abs(v.offset_m)):
             gt = read_image(manifest.resolve(v.image), channels=3)
-            lanes = _with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
+            lanes = with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
             for method, step in steps.items():
                 before, t0 = chain.samples, time.perf_counter()
                 img = chain.restore(v.offset_m, step)
@@ -223,7 +223,7 @@ def run_lateral_restoration(
                     seconds.setdefault(method, []).append(
                         (time.perf_counter() - t0) / (chain.samples - before)
                     )
-                scores.setdefault((v.offset_m, method), []).append(_score(img, gt, lanes))
+                scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))
                 result.views.setdefault(method, []).append(
                     RestoredView(
                         fi, v.offset_m, v.K, v.camera_to_world, v.world_to_camera, v.width, v.height, img
@@ -231,76 +231,8 @@ def run_lateral_restoration(
                 )
                 bar.update()
     bar.close()
-    result.rows = _rows(scores, {m: float(np.mean(s)) for m, s in seconds.items()}, ceilings)
+    result.rows = lateral_rows(scores, {m: float(np.mean(s)) for m, s in seconds.items()}, ceilings)
     return result
-
-
-def _targets(manifest: Manifest, frames: list[int] | None) -> list:
-    from ..world.package import lateral_views
-
-    targets = [v for v in lateral_views(manifest) if frames is None or v.frame in frames]
-    if not targets:
-        raise ValueError("the package has no lateral ground truth for these frames")
-    return targets
-
-
-def _lane_truths(manifest: Manifest, targets: list) -> dict:
-    """(offset, frame) -> lane truth of every target view that has a lane mask, all read before
-    any view is rendered or restored (a missing mask stops the run before its work)."""
-    return {(v.offset_m, v.frame): v.lane_truth(manifest) for v in targets if v.lanes is not None}
-
-
-def _with_ceiling(lanes, gt: np.ndarray, offset: float, ceilings: dict[float, list[float]]):
-    """``lanes`` (None passes through), after recording the segmenter's IoU on the Cycles
-    image itself: the ceiling at ``offset``."""
-    if lanes is not None:
-        ceilings.setdefault(offset, []).append(lanes.iou(gt))
-    return lanes
-
-
-def _score(img: np.ndarray, gt: np.ndarray, lanes) -> tuple[float, ...]:
-    """(PSNR, SSIM) against the Cycles image, and lane IoU where the view has a lane mask."""
-    return (psnr(img, gt), ssim(img, gt)) + (() if lanes is None else (lanes.iou(img),))
-
-
-def _rows(scores: dict[tuple[float, str], list], seconds: dict[str, float],
-          ceilings: dict[float, list[float]]) -> list[dict]:
-    """One row per (offset, method): PSNR, SSIM and, where every view has a lane mask,
-    ``lane_iou`` and its ceiling ``lane_iou_ceiling`` in IoU points (0 to 100)."""
-    rows = []
-    for (off, method), vals in sorted(scores.items(), key=lambda kv: (abs(kv[0][0]), kv[0][0], kv[0][1])):
-        p, s = np.mean([v[:2] for v in vals], axis=0)
-        row = {
-            "offset_m": off,
-            "method": method,
-            "psnr": round(float(p), 3),
-            "ssim": round(float(s), 4),
-            "frames": len(vals),
-        }
-        if all(len(v) == 3 for v in vals):
-            row["lane_iou"] = round(100.0 * float(np.mean([v[2] for v in vals])), 2)
-            row["lane_iou_ceiling"] = round(100.0 * float(np.mean(ceilings[off])), 2)
-        if method in seconds:
-            row["seconds_per_view"] = round(seconds[method], 3)
-        rows.append(row)
-    return rows
-
-
-def score_gaussians(
-    manifest: Manifest, gaussians: Gaussians, method: str, frames: list[int] | None = None
-) -> list[dict]:
-    """Rows for a reconstruction rendered as is (``raw_3dgs``, ``refined``) on the same views."""
-    render = SplatRenderer(gaussians)
-    scores: dict[tuple[float, str], list] = {}
-    ceilings: dict[float, list[float]] = {}
-    targets = _targets(manifest, frames)
-    truths = _lane_truths(manifest, targets)
-    for v in targets:
-        img = render(v.K, v.world_to_camera, v.width, v.height)
-        gt = read_image(manifest.resolve(v.image), channels=3)
-        lanes = _with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
-        scores.setdefault((v.offset_m, method), []).append(_score(img, gt, lanes))
-    return _rows(scores, {}, ceilings)
 
 
 def evaluate_lateral_restoration(manifest: Manifest, gaussians: Gaussians, model, **options) -> list[dict]:

@@ -1,8 +1,9 @@
 """Quality of a reconstruction against the package's Cycles ground truth.
 
 ``evaluate_heldout``: the training drive's held-out frames. ``evaluate_lateral``: the same
-drive seen from cameras moved sideways (the degradation the restoration stage must fix),
-one row per offset as ``report.json``'s ``metrics.lateral`` expects, method ``raw_3dgs``.
+drive seen from cameras moved sideways (the degradation the restoration stage must fix), one
+row per offset as ``report.json``'s ``metrics.lateral`` expects; the row helpers here are the
+one lateral scorer, which the restoration's evaluation uses for its methods too.
 PSNR in dB and SSIM (3DGS flavour, ``symdrive_core.metrics``) on [0, 1] images, averaged
 over frames.
 """
@@ -15,12 +16,8 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
-from ..splat.render import render_gaussians
+from ..splat.render import SplatRenderer, render_gaussians
 from ..world.package import lateral_views, split_frames
-
-
-def _score(pred: np.ndarray, target: np.ndarray) -> tuple[float, float]:
-    return psnr(pred, target), ssim(pred, target)
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
@@ -34,20 +31,72 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     for i in frames:
         cf = cam.frames[i]
         pred = render_gaussians(gaussians, cf.K, cf.world_to_camera, cam.width, cam.height)
-        scores.append(_score(pred, read_image(manifest.resolve(cf.image), channels=3)))
+        scores.append(score_view(pred, read_image(manifest.resolve(cf.image), channels=3), None))
     p, s = np.mean(scores, axis=0)
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
 
 
-def evaluate_lateral(manifest: Manifest, gaussians: Gaussians, method: str = "raw_3dgs") -> list[dict]:
-    """One row per lateral offset: {"offset_m", "method", "psnr", "ssim", "frames"}."""
-    by_offset: dict[float, list[tuple[float, float]]] = {}
-    for v in lateral_views(manifest):
-        pred = render_gaussians(gaussians, v.K, v.world_to_camera, v.width, v.height)
-        by_offset.setdefault(v.offset_m, []).append(_score(pred, read_image(manifest.resolve(v.image), channels=3)))
+def lateral_targets(manifest: Manifest, frames: list[int] | None) -> list:
+    """The package's lateral ground-truth views (of ``frames``, or all), in offset then frame order."""
+    targets = [v for v in lateral_views(manifest) if frames is None or v.frame in frames]
+    if not targets:
+        raise ValueError("the package has no lateral ground truth for these frames")
+    return targets
+
+
+def lane_truths(manifest: Manifest, targets: list) -> dict:
+    """(offset, frame) -> lane truth of every target view that has a lane mask, all read before
+    any view is rendered or restored (a missing mask stops the run before its work)."""
+    return {(v.offset_m, v.frame): v.lane_truth(manifest) for v in targets if v.lanes is not None}
+
+
+def with_ceiling(lanes, gt: np.ndarray, offset: float, ceilings: dict[float, list[float]]):
+    """``lanes`` (None passes through), after recording the segmenter's IoU on the Cycles
+    image itself: the ceiling at ``offset``."""
+    if lanes is not None:
+        ceilings.setdefault(offset, []).append(lanes.iou(gt))
+    return lanes
+
+
+def score_view(img: np.ndarray, gt: np.ndarray, lanes) -> tuple[float, ...]:
+    """(PSNR, SSIM) against the Cycles image, and lane IoU where the view has a lane mask."""
+    return (psnr(img, gt), ssim(img, gt)) + (() if lanes is None else (lanes.iou(img),))
+
+
+def lateral_rows(scores: dict[tuple[float, str], list], seconds: dict[str, float],
+          ceilings: dict[float, list[float]]) -> list[dict]:
+    """One row per (offset, method): PSNR, SSIM and, where every view has a lane mask,
+    ``lane_iou`` and its ceiling ``lane_iou_ceiling`` in IoU points (0 to 100)."""
     rows = []
-    for off in sorted(by_offset, key=lambda o: (abs(o), o)):
-        p, s = np.mean(by_offset[off], axis=0)
-        rows.append({"offset_m": off, "method": method, "psnr": round(float(p), 3), "ssim": round(float(s), 4),
-                     "frames": len(by_offset[off])})
+    for (off, method), vals in sorted(scores.items(), key=lambda kv: (abs(kv[0][0]), kv[0][0], kv[0][1])):
+        p, s = np.mean([v[:2] for v in vals], axis=0)
+        row = {
+            "offset_m": off,
+            "method": method,
+            "psnr": round(float(p), 3),
+            "ssim": round(float(s), 4),
+            "frames": len(vals),
+        }
+        if all(len(v) == 3 for v in vals):
+            row["lane_iou"] = round(100.0 * float(np.mean([v[2] for v in vals])), 2)
+            row["lane_iou_ceiling"] = round(100.0 * float(np.mean(ceilings[off])), 2)
+        if method in seconds:
+            row["seconds_per_view"] = round(seconds[method], 3)
+        rows.append(row)
     return rows
+
+
+def evaluate_lateral(manifest: Manifest, gaussians: Gaussians, method: str = "raw_3dgs",
+                     frames: list[int] | None = None) -> list[dict]:
+    """Rows for a reconstruction rendered as is (``raw_3dgs``, ``refined``) on the same views."""
+    render = SplatRenderer(gaussians)
+    scores: dict[tuple[float, str], list] = {}
+    ceilings: dict[float, list[float]] = {}
+    targets = lateral_targets(manifest, frames)
+    truths = lane_truths(manifest, targets)
+    for v in targets:
+        img = render(v.K, v.world_to_camera, v.width, v.height)
+        gt = read_image(manifest.resolve(v.image), channels=3)
+        lanes = with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
+        scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))
+    return lateral_rows(scores, {}, ceilings)

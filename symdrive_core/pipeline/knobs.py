@@ -112,8 +112,9 @@ def lane_iou(rows: list[dict]) -> dict:
 
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Sampler steps / ``N_start`` and the auto-regressive step ``d`` on lateral views."""
-    from ..diffusion.restore import run_lateral_restoration, score_gaussians
+    from ..diffusion.restore import run_lateral_restoration
     from ..diffusion.sampler import SamplerConfig
+    from ..optim.evaluate import evaluate_lateral
     from ..world.package import lateral_views, with_lateral_offsets
 
     scoped = with_lateral_offsets(manifest, budget.offsets)
@@ -121,7 +122,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
 
     def raw() -> dict:  # the reference every restoration setting should beat
         t0 = time.perf_counter()
-        rows = score_gaussians(scoped, gaussians, "raw_3dgs", frames)
+        rows = evaluate_lateral(scoped, gaussians, "raw_3dgs", frames)
         return {"psnr": float(np.mean([r["psnr"] for r in rows])), "ssim": float(np.mean([r["ssim"] for r in rows])),
                 **lane_iou(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
 

@@ -153,9 +153,9 @@ def restore_stage(ctx) -> StageResult:
         RestoredView,
         lateral_camera,
         run_lateral_restoration,
-        score_gaussians,
     )
     from ..io.images import read_image, write_image
+    from ..optim.evaluate import evaluate_lateral
     from ..splat.render import SplatRenderer
     from ..world.package import with_lateral_offsets
 
@@ -171,7 +171,7 @@ def restore_stage(ctx) -> StageResult:
         scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
                                       progress=ctx.progress)
-        metrics["lateral"] = score_gaussians(scored, g, "raw_3dgs", opts.frames) + res.rows
+        metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", opts.frames) + res.rows
         ctx.shared.restored = list(res.views[default])
         cam_name = lateral_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
@@ -198,8 +198,8 @@ def restore_stage(ctx) -> StageResult:
 def refine_stage(ctx) -> StageResult:
     """Fine-tune the background on the recorded views plus the restored lateral views."""
     from ..diffusion.refine import RefineConfig, refine_gaussians
-    from ..diffusion.restore import score_gaussians
     from ..io.ply import write_splats
+    from ..optim.evaluate import evaluate_lateral
 
     refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
                                       RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
@@ -207,7 +207,7 @@ def refine_stage(ctx) -> StageResult:
     write_splats(ctx.tree.path("refine", "background.ply"), refined)
     metrics = {}
     if ctx.plan.runs("evaluate") and _has_lateral_truth(ctx.manifest):
-        metrics["lateral"] = [r for r in score_gaussians(ctx.manifest, refined, "refined", ctx.options.frames)
+        metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.options.frames)
                               if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets]
     details = {k: v for k, v in stats.items() if isinstance(v, (int, float))}
     return StageResult({"iterations": ctx.options.refine_iters, **details}, metrics)

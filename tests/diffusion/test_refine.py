@@ -1,8 +1,9 @@
 import numpy as np
 
 from symdrive_core.diffusion.refine import RefineConfig, refine_gaussians
-from symdrive_core.diffusion.restore import RestoredView, score_gaussians
+from symdrive_core.diffusion.restore import RestoredView
 from symdrive_core.gaussians import Gaussians
+from symdrive_core.optim.evaluate import evaluate_lateral
 from symdrive_core.scene import load_manifest
 from symdrive_core.world.package import lateral_views
 from tests.optim.conftest import render_truth, synthetic_package  # noqa: F401  (fixture)
@@ -32,11 +33,11 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
         )
         for v in lateral_views(manifest)
     ]
-    before = np.mean([r["psnr"] for r in score_gaussians(manifest, damaged, "raw_3dgs")])
+    before = np.mean([r["psnr"] for r in evaluate_lateral(manifest, damaged, "raw_3dgs")])
     refined, stats = refine_gaussians(
         manifest, damaged, views, RefineConfig(iters=40, depth_weight=0.0), progress=False
     )
-    after = np.mean([r["psnr"] for r in score_gaussians(manifest, refined, "refined")])
+    after = np.mean([r["psnr"] for r in evaluate_lateral(manifest, refined, "refined")])
     assert after > before + 1.0
     assert stats["restored_views"] == len(views) and stats["loss_last"] < stats["loss_first"]
 
@@ -45,7 +46,7 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
         manifest, damaged, [], RefineConfig(iters=40, depth_weight=0.0), progress=False
     )
     assert control_stats["restored_views"] == 0
-    control_psnr = np.mean([r["psnr"] for r in score_gaussians(manifest, control, "control")])
+    control_psnr = np.mean([r["psnr"] for r in evaluate_lateral(manifest, control, "control")])
     assert control_psnr < after
 
 

@@ -69,14 +69,14 @@ def test_a_missing_lane_mask_stops_restore_evaluate_with_exit_2(tmp_path, capsys
 
 
 def test_lateral_rows_carry_lane_iou_and_its_ceiling():
-    """``score_gaussians`` rows (raw 3DGS at 3 m, frame 12): lane IoU of the render and, beside
+    """``evaluate_lateral`` rows (raw 3DGS at 3 m, frame 12): lane IoU of the render and, beside
     it, the segmenter's IoU on the Cycles images of the same views."""
-    from symdrive_core.diffusion.restore import score_gaussians
     from symdrive_core.io.ply import read_splats
+    from symdrive_core.optim.evaluate import evaluate_lateral
     from symdrive_core.world.package import with_lateral_offsets
 
     scoped = with_lateral_offsets(MANIFEST, [-3.0, 3.0])
-    rows = score_gaussians(scoped, read_splats(MANIFEST.resolve(MANIFEST.background_splats)), "raw_3dgs", [12])
+    rows = evaluate_lateral(scoped, read_splats(MANIFEST.resolve(MANIFEST.background_splats)), "raw_3dgs", [12])
     assert [(r["offset_m"], r["frames"]) for r in rows] == [(-3.0, 1), (3.0, 1)]
     for r in rows:
         v = next(v for v in lateral_views(scoped) if v.offset_m == r["offset_m"] and v.frame == 12)
@@ -86,7 +86,7 @@ def test_lateral_rows_carry_lane_iou_and_its_ceiling():
 
 
 def test_rows_have_no_lane_iou_without_lane_masks():
-    from symdrive_core.diffusion.restore import _rows
+    from symdrive_core.optim.evaluate import lateral_rows
 
-    rows = _rows({(1.0, "raw_3dgs"): [(25.0, 0.8), (27.0, 0.9)]}, {}, {})
+    rows = lateral_rows({(1.0, "raw_3dgs"): [(25.0, 0.8), (27.0, 0.9)]}, {}, {})
     assert rows == [{"offset_m": 1.0, "method": "raw_3dgs", "psnr": 26.0, "ssim": 0.85, "frames": 2}]
