@@ -24,6 +24,7 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
 
@@ -48,17 +49,6 @@ def chain_positions(offset: float, step: float) -> list[float]:
     return [offset * k / n for k in range(1, n + 1)]
 
 
-@dataclass
-class Camera:
-    K: np.ndarray
-    camera_to_world: np.ndarray
-    width: int
-    height: int
-
-    def shifted(self, offset_m: float) -> np.ndarray:
-        return conventions.lateral_shift(self.camera_to_world, offset_m)
-
-
 class LateralChain:
     """Restores the lateral views of one recorded frame; renders and restorations are cached,
     so chains that share a prefix (0.5, 1.0, ... with d = 0.5) are sampled once."""
@@ -68,7 +58,7 @@ class LateralChain:
         restorer,
         render: SplatRenderer,
         recorded: np.ndarray,
-        camera: Camera,
+        camera: CameraView,
         sampler: SamplerConfig = DEFAULT,
     ):
         self.restorer, self.render, self.camera, self.sampler = restorer, render, camera, sampler
@@ -85,13 +75,13 @@ class LateralChain:
         cf = cam.frames[frame]
         recorded = (read_image(manifest.resolve(cf.image), channels=3) if cf.image
                     else render(cf.K, cf.world_to_camera, cam.width, cam.height))
-        return cls(restorer, render, recorded, Camera(cf.K, cf.camera_to_world, cam.width, cam.height), sampler)
+        return cls(restorer, render, recorded, CameraView.of_frame(cam, frame), sampler)
 
     def raw(self, offset: float) -> np.ndarray:
         key = round(offset, 6)
         if key not in self._renders:
-            c = self.camera
-            self._renders[key] = self.render.shifted(c.K, c.camera_to_world, offset, c.width, c.height)
+            v = self.camera.shifted(offset)
+            self._renders[key] = self.render(v.K, v.world_to_camera, v.width, v.height)
         return self._renders[key]
 
     def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray) -> np.ndarray:

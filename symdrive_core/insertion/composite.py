@@ -12,39 +12,18 @@ optimisation may reach; the compositing kernel still drops every alpha below 1/2
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 
-from .. import conventions
 from ..gaussians import Gaussians
 from ..scene import Pose
+from ..scene.camera import CameraView
 from ..splat.constants import ALPHA_THRESHOLD
 from ..splat.projection import project_gaussians
 from ..splat.rasterize import RasterizePixels, bin_gaussians
 from ..splat.sh import sh_to_color
 from ..splat.tensors import GaussianTensors
 from .place import place
-
-
-@dataclass(frozen=True)
-class CameraView:
-    world_to_camera: np.ndarray  # [4, 4] OpenCV
-    K: np.ndarray  # [3, 3]
-    width: int
-    height: int
-
-    @property
-    def camera_to_world(self) -> np.ndarray:
-        return conventions.invert_rigid(self.world_to_camera)
-
-    def crop(self, rows: slice, cols: slice) -> CameraView:
-        """The sub-window ``[rows, cols]`` as a camera of its own (principal point moved)."""
-        K = np.array(self.K, dtype=np.float64, copy=True)
-        K[0, 2] -= cols.start
-        K[1, 2] -= rows.start
-        return CameraView(self.world_to_camera, K, cols.stop - cols.start, rows.stop - rows.start)
 
 
 class InsertionView:

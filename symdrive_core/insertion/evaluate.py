@@ -24,11 +24,12 @@ from ..io.ply import write_splats
 from ..metrics import bbox_crop, psnr, ssim
 from ..optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from ..world.package import split_frames
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
 from .cast_shadow import CastShadow, vehicle_shadow
-from .composite import CameraView, InsertionView
+from .composite import InsertionView
 from .features import crop_frechet, vehicle_crop
 from .harmonizer import Harmonizer, restorer_harmonizer
 from .placements import HeldOut, camera_view, held_out_placements, training_views

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import conventions
 from ..scene import Manifest, Pose
-from .composite import CameraView
+from ..scene.camera import CameraView
 
 
 @dataclass
@@ -35,11 +35,10 @@ def held_out_placements(manifest: Manifest) -> list[HeldOut]:
     out = []
     for k, e in enumerate((manifest.ground_truth or {}).get("insertion", [])):
         cam = manifest.camera(e.get("camera", manifest.cameras[0].name))
-        cf = cam.frames[int(e["frame"])]
         pose = Pose(np.asarray(e["pose"]["translation"], dtype=np.float64),
                     np.asarray(e["pose"]["rotation"], dtype=np.float64))
         out.append(HeldOut(k, e["asset"], pose, np.asarray(e["wlh"], dtype=np.float64), int(e["frame"]), cam.name,
-                           CameraView(cf.world_to_camera, cf.K, cam.width, cam.height), e["with"], e["mask"],
+                           CameraView.of_frame(cam, int(e["frame"])), e["with"], e["mask"],
                            e.get("shadow_mask")))
     return out
 
@@ -65,6 +64,4 @@ def training_views(manifest: Manifest, placement: HeldOut, frames: list[int], n_
 
 
 def camera_view(manifest: Manifest, frame: int, camera: str | None = None) -> CameraView:
-    cam = manifest.camera(camera) if camera else manifest.cameras[0]
-    cf = cam.frames[frame]
-    return CameraView(cf.world_to_camera, cf.K, cam.width, cam.height)
+    return CameraView.of_frame(manifest.camera(camera) if camera else manifest.cameras[0], frame)

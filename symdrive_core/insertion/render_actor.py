@@ -18,8 +18,8 @@ from ..errors import InputError
 from ..io.images import write_image, write_mask
 from ..io.ply import read_splats
 from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
+from ..scene.camera import CameraView
 from .assets import actor_gaussians
-from .composite import CameraView
 from .evaluate import insert_frame
 
 
@@ -47,7 +47,7 @@ def insert_actor(manifest: Manifest, actor_id: str, out, *, background=None, fli
             pose = actor.pose(fi)
             if pose is not None and box_in_frustum(box_corners_world(lo, hi, pose.R, pose.translation),
                                                    cf.world_to_camera, cf.K, cam.width, cam.height):
-                jobs.append((cam, fi, CameraView(cf.world_to_camera, cf.K, cam.width, cam.height), pose))
+                jobs.append((cam, fi, CameraView.of_frame(cam, fi), pose))
     out = Path(out)
     for cam, fi, view, pose in tqdm(jobs, desc=f"insert {actor_id}", unit="frame", disable=not progress):
         frame = insert_frame(manifest, bg, vehicle, pose, actor.wlh, view)

@@ -110,17 +110,15 @@ def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progres
     (with its cast shadow where the scene has a sun)."""
     from tqdm import tqdm
 
-    from ..insertion.composite import CameraView
     from ..insertion.evaluate import insert_frame
     from ..io.images import write_image
+    from ..scene.camera import CameraView
 
     cam = manifest.cameras[0]
     paths = []
     for fi, pose in enumerate(tqdm(road_trajectory(manifest, float(wlh[2])), desc="trajectory", unit="frame",
                                    disable=not progress)):
-        cf = cam.frames[fi]
-        frame = insert_frame(manifest, background, vehicle, pose, wlh,
-                             CameraView(cf.world_to_camera, cf.K, cam.width, cam.height))
+        frame = insert_frame(manifest, background, vehicle, pose, wlh, CameraView.of_frame(cam, fi))
         paths.append(write_image(out_dir / f"{fi:06d}.png", frame.image))
     return paths
 

@@ -65,7 +65,8 @@ class OnlineRestorer:
         return fi, (round(off / q) * q if q > 0 else off)
 
     def _chain(self, camera: str, fi: int):
-        from ..diffusion.restore import Camera, LateralChain
+        from ..diffusion.restore import LateralChain
+        from ..scene.camera import CameraView
 
         key = (camera, fi)
         if key not in self.chains:
@@ -83,7 +84,7 @@ class OnlineRestorer:
             else:
                 recorded = self._render(K, cf.world_to_camera, w, h)
             self.chains[key] = LateralChain(self.model, self._render, recorded,
-                                            Camera(K, cf.camera_to_world, w, h), self.sampler())
+                                            CameraView(cf.world_to_camera, K, w, h), self.sampler())
         return self.chains[key]
 
     def background(self, camera: str, c2w: np.ndarray) -> np.ndarray | None:

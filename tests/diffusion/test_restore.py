@@ -2,15 +2,18 @@ import numpy as np
 import pytest
 
 from symdrive_core import conventions
-from symdrive_core.diffusion.restore import Camera, LateralChain, chain_positions, method_step
+from symdrive_core.diffusion.restore import LateralChain, chain_positions, method_step
 from symdrive_core.diffusion.sampler import SamplerConfig
+from symdrive_core.scene.camera import CameraView
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 
 class OffsetRenderer:
-    """A stand-in renderer whose image encodes the camera's lateral offset in its pixel value."""
+    """A stand-in renderer whose image encodes the camera's lateral offset in its pixel value
+    (the recorded camera sits at the origin looking down +z, so the offset is its x position)."""
 
-    def shifted(self, K, c2w, offset, width, height):
+    def __call__(self, K, world_to_camera, width, height):
+        offset = float(conventions.invert_rigid(world_to_camera)[0, 3])
         return np.full((height, width, 3), 0.5 + offset / 10.0, np.float32)
 
 
@@ -37,7 +40,7 @@ def chain(step_sampler=None):
     restorer = RecordingRestorer()
     recorded = np.full((4, 6, 3), 0.5, np.float32)
     return restorer, LateralChain(
-        restorer, OffsetRenderer(), recorded, Camera(np.eye(3), np.eye(4), 6, 4), step_sampler
+        restorer, OffsetRenderer(), recorded, CameraView(np.eye(4), np.eye(3), 6, 4), step_sampler
     )
 
 
@@ -94,8 +97,9 @@ def test_init_is_the_render_at_the_target():
 
 def test_camera_shift_matches_conventions():
     c2w = np.eye(4)
-    cam = Camera(np.eye(3), c2w, 4, 4)
-    assert np.allclose(cam.shifted(2.0), conventions.lateral_shift(c2w, 2.0))
+    cam = CameraView(conventions.invert_rigid(c2w), np.eye(3), 4, 4)
+    assert np.allclose(cam.shifted(2.0).camera_to_world, conventions.lateral_shift(c2w, 2.0))
+    assert cam.shifted(2.0).K is cam.K and (cam.shifted(2.0).width, cam.shifted(2.0).height) == (4, 4)
 
 
 def test_lateral_views_of_every_frame_reuse_the_scored_chains(synthetic_package):  # noqa: F811

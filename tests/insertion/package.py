@@ -15,9 +15,10 @@ import numpy as np
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import SH_C0, Gaussians
-from symdrive_core.insertion.composite import CameraView, InsertionView
+from symdrive_core.insertion.composite import InsertionView
 from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.io.ply import write_splats
+from symdrive_core.scene.camera import CameraView
 from symdrive_core.splat.tensors import GaussianTensors
 
 from ..conftest import look_at_c2w
