@@ -145,7 +145,7 @@ class TakeRows(torch.autograd.Function):
         out = []
         with _KernelScope(chunk=0, items=rows.shape[0]):
             for t in tensors:
-                src = _np(t).reshape(t.shape[0], -1)
+                src = _np(t).reshape(t.shape[0], math.prod(t.shape[1:]))
                 dst = np.empty((rows.shape[0], src.shape[1]), src.dtype)
                 kernels.take_rows(src, rows, dst)
                 out.append(torch.from_numpy(dst.reshape((rows.shape[0],) + tuple(t.shape[1:]))).to(t.device))
@@ -159,7 +159,7 @@ class TakeRows(torch.autograd.Function):
                 if g is None:
                     out.append(None)
                     continue
-                src = _np(g.to(dtype)).reshape(g.shape[0], -1)
+                src = _np(g.to(dtype)).reshape(g.shape[0], math.prod(shape[1:]))
                 dst = np.empty((shape[0], src.shape[1]), src.dtype)
                 kernels.put_rows(src, ctx.pos, dst)
                 out.append(torch.from_numpy(dst.reshape(shape)).to(device))
