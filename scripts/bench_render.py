@@ -3,9 +3,10 @@
     python scripts/bench_render.py --quick            # ~1 minute subset
     python scripts/bench_render.py --json out.json    # everything (several minutes)
 
-Reports the compositing kernels against the pixel-outer kernels they replaced
-(``symdrive_core.splat.kernels_baseline``), same scene, same thread count, alternating runs: the
-whole forward and forward+backward and the compositing kernels alone, with the ratios; the first
+Reports today's frame against the baseline frame (``symdrive_core.splat.rasterize_baseline``: the
+pixel-outer kernels of ``kernels_baseline`` and the shared path as it was), same scene, same thread
+count, alternating runs: the whole forward and forward+backward, the part outside the compositing
+kernels and the kernels alone, with the ratios; the first
 demo-street frame of a fresh process (numba cache warm); forward and forward+backward times vs
 Gaussian count and resolution (numba kernels next to the pure-torch reference, with the ratio),
 tile-Gaussian intersections per second, peak RSS of a
@@ -41,6 +42,7 @@ from symdrive_core.splat import (
     render_layers,
     render_oracle,
 )
+from symdrive_core.splat.rasterize_baseline import rasterize_baseline
 
 
 def make_scene(n, width, height, seed=0, deg=3, dtype=torch.float32, fov_deg=70.0):
@@ -134,10 +136,10 @@ def bench_resolutions(n, resolutions, ref_max_pixels, results):
 
 
 @contextlib.contextmanager
-def compositing(module, spent):
-    """Render with ``module``'s compositing kernels; ``spent`` gets each call's wall and CPU seconds
-    (``fwd``, ``fwd_cpu``, ``bwd``, ``bwd_cpu``; CPU time of all threads: the work, whatever else runs)."""
-    saved = kernels.rasterize_fwd, kernels.rasterize_bwd
+def timed_kernels(module, spent):
+    """Time ``module``'s compositing kernels: ``spent`` gets each call's wall and CPU seconds (``fwd``,
+    ``fwd_cpu``, ``bwd``, ``bwd_cpu``; CPU time of all threads: the work, whatever else runs)."""
+    saved = module.rasterize_fwd, module.rasterize_bwd
 
     def timed(name, fn):
         def call(*args):
@@ -147,53 +149,60 @@ def compositing(module, spent):
             spent[name + "_cpu"] = time.process_time() - c
         return call
 
-    kernels.rasterize_fwd = timed("fwd", module.rasterize_fwd)
-    kernels.rasterize_bwd = timed("bwd", module.rasterize_bwd)
+    module.rasterize_fwd = timed("fwd", saved[0])
+    module.rasterize_bwd = timed("bwd", saved[1])
     try:
         yield
     finally:
-        kernels.rasterize_fwd, kernels.rasterize_bwd = saved
+        module.rasterize_fwd, module.rasterize_bwd = saved
 
 
 def bench_baseline(n, res, results, repeat=3):
-    """Current compositing kernels against the baseline: alternating runs, best of ``repeat`` each."""
+    """Today's frame against the baseline frame: alternating runs, best of ``repeat`` each.
+
+    The baseline frame is :func:`rasterize_baseline` (the pixel-outer compositing kernels and the
+    shared path as it was: torch gathers and index-put backward, serial gradient reduction, binning
+    from index-ordered rectangles); the current one is :func:`rasterize`. Both use the same projection
+    and SH kernels. ``shared`` is the frame's time outside the compositing kernels.
+    """
     W, H = res
     ps, V, K = make_scene(n, W, H)
-    print(f"\n## Compositing kernels vs the pixel-outer baseline: {n} Gaussians, {W}x{H}, "
+    print(f"\n## Whole frame and compositing kernels vs the baseline: {n} Gaussians, {W}x{H}, "
           f"{numba.get_num_threads()} threads (s, best of {repeat}; ratio = baseline / current)")
-    print(f"{'case':>16} {'baseline':>9} {'current':>9} {'ratio':>6}   {'kernel base':>11} {'kernel cur':>10} "
-          f"{'ratio':>6}   {'kernel CPU s base':>16} {'cur':>6} {'ratio':>6}")
+    print(f"{'case':>8} {'frame base':>10} {'cur':>6} {'ratio':>6}   {'shared base':>11} {'cur':>6} {'ratio':>6}   "
+          f"{'kernels base':>12} {'cur':>6} {'ratio':>6}   {'kernel CPU base':>15} {'cur':>6} {'ratio':>6}")
+    frames = {"baseline": (kernels_baseline, rasterize_baseline), "current": (kernels, rasterize)}
     for backward in (False, True):
-        def run():
+        def run(fn):
             if not backward:
                 with torch.no_grad():
-                    return rasterize(*ps, V, K, W, H)
+                    return fn(*ps, V, K, W, H)
             leaf = [p.detach().requires_grad_(True) for p in ps]
-            out = rasterize(*leaf, V, K, W, H)
+            out = fn(*leaf, V, K, W, H)
             (out[0].sum() + out[1].sum()).backward()
             return out
 
-        best = {name: [math.inf] * 3 for name in ("baseline", "current")}  # whole, kernels, kernels' CPU
+        best = {name: [math.inf] * 4 for name in frames}  # whole, shared, kernels, kernels' CPU
         for rep in range(repeat + 1):  # the first round compiles and warms up
-            for name, module in (("baseline", kernels_baseline), ("current", kernels)):
+            for name, (module, fn) in frames.items():
                 spent = {}
-                with compositing(module, spent):
+                with timed_kernels(module, spent):
                     t = time.perf_counter()
-                    info = run()[2]
+                    run(fn)
                     dt = time.perf_counter() - t
                 if rep:
                     wall = sum(v for k, v in spent.items() if not k.endswith("_cpu"))
                     cpu = sum(v for k, v in spent.items() if k.endswith("_cpu"))
-                    best[name] = [min(b, v) for b, v in zip(best[name], (dt, wall, cpu))]
-        (bw, bk, bc), (cw, ck, cc) = best["baseline"], best["current"]
+                    best[name] = [min(b, v) for b, v in zip(best[name], (dt, dt - wall, wall, cpu))]
+        (bw, bs, bk, bc), (cw, cs, ck, cc) = best["baseline"], best["current"]
         label = "fwd+bwd" if backward else "fwd"
-        print(f"{label:>16} {bw:9.3f} {cw:9.3f} {bw / cw:5.2f}x   {bk:11.3f} {ck:10.3f} {bk / ck:5.2f}x   "
-              f"{bc:16.3f} {cc:6.3f} {bc / cc:5.2f}x", flush=True)
+        print(f"{label:>8} {bw:10.3f} {cw:6.3f} {bw / cw:5.2f}x   {bs:11.3f} {cs:6.3f} {bs / cs:5.2f}x   "
+              f"{bk:12.3f} {ck:6.3f} {bk / ck:5.2f}x   {bc:15.3f} {cc:6.3f} {bc / cc:5.2f}x", flush=True)
         results.append({"table": "baseline", "n": n, "width": W, "height": H, "backward": backward,
                         "threads": numba.get_num_threads(), "baseline_s": bw, "current_s": cw, "ratio": bw / cw,
+                        "baseline_shared_s": bs, "current_shared_s": cs, "shared_ratio": bs / cs,
                         "baseline_kernel_s": bk, "current_kernel_s": ck, "kernel_ratio": bk / ck,
-                        "baseline_kernel_cpu_s": bc, "current_kernel_cpu_s": cc, "kernel_cpu_ratio": bc / cc,
-                        "n_isect": info["n_isect"]})
+                        "baseline_kernel_cpu_s": bc, "current_kernel_cpu_s": cc, "kernel_cpu_ratio": bc / cc})
 
 
 FIRST_FRAME = """

@@ -122,25 +122,26 @@ def ellipse_half_extent(a, b, c, lim):
 
 
 @njit(parallel=True, cache=True)
-def tile_rects(means2d, radii, tile_size, tiles_x, tiles_y):
-    """Tile rectangle [x0, x1) x [y0, y1) of each Gaussian (gsplat's floor/ceil rule)."""
-    m = means2d.shape[0]
-    rects = np.zeros((m, 4), dtype=np.int64)
-    for i in prange(m):
+def tile_rects(means2d, radii, order, tile_size, tiles_x, tiles_y):
+    """Tile rectangle [x0, x1) x [y0, y1) (gsplat's floor/ceil rule) of Gaussian ``order[j]`` in row j.
+
+    In depth order, so that binning reads the rectangles as a stream instead of one random read per
+    Gaussian and pass; int32, half the bytes of int64.
+    """
+    m = order.shape[0]
+    rects = np.zeros((m, 4), dtype=np.int32)
+    for j in prange(m):
+        i = order[j]
         rx = float(radii[i, 0])
         ry = float(radii[i, 1])
         if rx <= 0.0 and ry <= 0.0:
             continue
         mx = float(means2d[i, 0])
         my = float(means2d[i, 1])
-        x0 = min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x))
-        x1 = min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x))
-        y0 = min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y))
-        y1 = min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y))
-        rects[i, 0] = np.int64(x0)
-        rects[i, 1] = np.int64(x1)
-        rects[i, 2] = np.int64(y0)
-        rects[i, 3] = np.int64(y1)
+        rects[j, 0] = np.int32(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x)))
+        rects[j, 1] = np.int32(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x)))
+        rects[j, 2] = np.int32(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y)))
+        rects[j, 3] = np.int32(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y)))
     return rects
 
 
@@ -186,20 +187,27 @@ def _radix_order(codes, n_bits):
 
 @njit(parallel=True, cache=True)
 def bin_tiles(order, rects, tiles_x, tiles_y):
-    """Per-tile lists of Gaussians in ``order`` (front to back): (offsets[n_tiles+1], ids[n_isect]).
+    """Per-tile lists of Gaussians in ``order`` (front to back) and each Gaussian's list positions.
 
+    ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`). Returns
+    ``(offsets[n_tiles+1], ids[n_isect], row_start[m+1], rows[n_isect])``: tile t's list is
+    ``ids[offsets[t]:offsets[t+1]]``; Gaussian g's list positions are ``rows[row_start[g]:row_start[g+1]]``,
+    increasing (its tiles are visited row by row), so :func:`reduce_rows` sums per Gaussian in
+    parallel in the order of one serial pass over the lists.
     ``order`` is cut into ``BIN_CHUNKS`` pieces counted and written in parallel; within a tile the
     pieces follow each other in order, so the lists are those of one pass in ``order``.
     """
     n_tiles = tiles_x * tiles_y
     m = order.shape[0]
     counts = np.zeros((BIN_CHUNKS, n_tiles), dtype=np.int64)
+    per_gaussian = np.zeros(m + 1, dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
-            i = order[j]
-            for ty in range(rects[i, 2], rects[i, 3]):
-                for tx in range(rects[i, 0], rects[i, 1]):
+            x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            for ty in range(y0, y1):
+                for tx in range(x0, x1):
                     counts[ch, ty * tiles_x + tx] += 1
+            per_gaussian[order[j] + 1] = max(x1 - x0, 0) * max(y1 - y0, 0)
     offsets = np.zeros(n_tiles + 1, dtype=np.int64)
     for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
         at = offsets[t]
@@ -208,17 +216,40 @@ def bin_tiles(order, rects, tiles_x, tiles_y):
             counts[ch, t] = at
             at += c
         offsets[t + 1] = at
+    row_start = np.cumsum(per_gaussian)
     ids = np.empty(offsets[n_tiles], dtype=np.int32)
+    rows = np.empty(offsets[n_tiles], dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         cursor = counts[ch]
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             i = order[j]
-            for ty in range(rects[i, 2], rects[i, 3]):
-                for tx in range(rects[i, 0], rects[i, 1]):
+            at = row_start[i]
+            for ty in range(rects[j, 2], rects[j, 3]):
+                for tx in range(rects[j, 0], rects[j, 1]):
                     t = ty * tiles_x + tx
                     ids[cursor[t]] = i
+                    rows[at] = cursor[t]
+                    at += 1
                     cursor[t] += 1
-    return offsets, ids
+    return offsets, ids, row_start, rows
+
+
+@njit(parallel=True, cache=True)
+def take_rows(src, rows, out):
+    """out[j] = src[rows[j]] for 2D arrays: the visible Gaussians' rows in one parallel pass."""
+    for j in prange(rows.shape[0]):
+        i = rows[j]
+        for f in range(src.shape[1]):
+            out[j, f] = src[i, f]
+
+
+@njit(parallel=True, cache=True)
+def put_rows(src, pos, out):
+    """out[i] = src[pos[i]], zeros where pos[i] < 0: take_rows' gradient, every row of ``out`` written once."""
+    for i in prange(out.shape[0]):
+        j = pos[i]
+        for f in range(out.shape[1]):
+            out[i, f] = src[j, f] if j >= 0 else 0.0
 
 
 # one float64 record per Gaussian, read once per tile-Gaussian intersection (one contiguous read
@@ -373,7 +404,8 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
 def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst,
                   r_m2d, r_conic, r_opac, r_color):
-    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``).
+    """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``;
+    views of one [n_isect, 6 + C] array keep each intersection's row in one cache line).
 
     The rows must come in zeroed: rows of Gaussians that reach no pixel are not written.
     """
@@ -545,16 +577,23 @@ def _lane_sum(lanes, f, i0, i1):
     return s
 
 
-@njit(cache=True)
-def reduce_rows(ids, r_m2d, r_conic, r_opac, r_color, g_m2d, g_conic, g_opac, g_color):
-    C = r_color.shape[1]
-    for j in range(ids.shape[0]):
-        g = ids[j]
-        g_m2d[g, 0] += r_m2d[j, 0]
-        g_m2d[g, 1] += r_m2d[j, 1]
-        g_conic[g, 0] += r_conic[j, 0]
-        g_conic[g, 1] += r_conic[j, 1]
-        g_conic[g, 2] += r_conic[j, 2]
-        g_opac[g] += r_opac[j]
+@njit(parallel=True, cache=True)
+def reduce_rows(row_start, rows, r, g_m2d, g_conic, g_opac, g_color):
+    """Per Gaussian g the float64 sum of the gradient rows ``r[rows[row_start[g]:row_start[g+1]]]``
+    (``r[j]`` = list position j's 2D mean, conic, opacity and colour gradients, one row per cache
+    line), in list order whatever the thread count, stored in the outputs' dtype."""
+    C = g_color.shape[1]
+    for g in prange(row_start.shape[0] - 1):
+        acc = np.zeros(6 + C)
+        for p in range(row_start[g], row_start[g + 1]):
+            j = rows[p]
+            for f in range(6 + C):
+                acc[f] += r[j, f]
+        g_m2d[g, 0] = acc[0]
+        g_m2d[g, 1] = acc[1]
+        g_conic[g, 0] = acc[2]
+        g_conic[g, 1] = acc[3]
+        g_conic[g, 2] = acc[4]
+        g_opac[g] = acc[5]
         for ch in range(C):
-            g_color[g, ch] += r_color[j, ch]
+            g_color[g, ch] = acc[6 + ch]

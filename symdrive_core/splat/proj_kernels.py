@@ -367,12 +367,16 @@ def _sh_basis(degree, x, y, z, b):
 
 
 @njit(parallel=True, cache=True)
-def sh_fwd(degree, sh, dirs, clamp, out):
-    """out[i, c] = sum_k basis_k(normalize(dirs[i])) sh[i, k, c]; clamp: max(out + 0.5, 0)."""
-    n = sh.shape[0]
+def sh_fwd(degree, sh, dirs, rows, clamp, out):
+    """out[j, c] = sum_k basis_k(normalize(dirs[i])) sh[i, k, c] for i = rows[j]; clamp: max(out + 0.5, 0).
+
+    ``rows`` picks the Gaussians (the visible ones of a frame) from the full arrays, so that no
+    gathered copy of the coefficients is made.
+    """
     K = (degree + 1) * (degree + 1)
     C = sh.shape[2]
-    for i in prange(n):
+    for j in prange(rows.shape[0]):
+        i = rows[j]
         b = np.empty(16)
         x, y, z, inv, good = _unit_dir(dirs, i)
         _sh_basis(degree, x, y, z, b)
@@ -382,23 +386,32 @@ def sh_fwd(degree, sh, dirs, clamp, out):
                 v += b[k] * float(sh[i, k, c])
             if clamp:
                 v = max(v + 0.5, 0.0)
-            out[i, c] = v
+            out[j, c] = v
 
 
 @njit(parallel=True, cache=True)
-def sh_bwd(degree, sh, dirs, clamp, g_out, d_sh, d_dirs):
-    """Gradients of sh_fwd w.r.t. the coefficients (d_sh, zero beyond the degree) and the directions."""
+def sh_bwd(degree, sh, dirs, pos, clamp, g_out, d_sh, d_dirs):
+    """Gradients of sh_fwd w.r.t. the coefficients (d_sh, zero beyond the degree) and the directions.
+
+    Every row of the full ``d_sh`` and ``d_dirs`` is written: row ``i`` gets output row ``pos[i]``'s
+    gradient, or zeros where ``pos[i] < 0`` (a Gaussian ``rows`` did not pick), in one pass.
+    """
     n = sh.shape[0]
     K = (degree + 1) * (degree + 1)
     C = sh.shape[2]
     for i in prange(n):
+        j = pos[i]
+        if j < 0:
+            d_sh[i] = 0.0
+            d_dirs[i] = 0.0
+            continue
         b = np.empty(16)
         gb = np.zeros(16)
         gv = np.empty(C)
         x, y, z, inv, good = _unit_dir(dirs, i)
         _sh_basis(degree, x, y, z, b)
         for c in range(C):
-            g = float(g_out[i, c])
+            g = float(g_out[j, c])
             if clamp:
                 v = 0.0
                 for k in range(K):
@@ -412,6 +425,9 @@ def sh_bwd(degree, sh, dirs, clamp, g_out, d_sh, d_dirs):
                 d_sh[i, k, c] = b[k] * gv[c]
                 acc += float(sh[i, k, c]) * gv[c]
             gb[k] = acc
+        for k in range(K, sh.shape[1]):
+            for c in range(C):
+                d_sh[i, k, c] = 0.0
         gx = 0.0
         gy = 0.0
         gz = 0.0

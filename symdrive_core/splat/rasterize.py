@@ -31,6 +31,8 @@ from .sh import sh_to_color
 class TileBins:
     offsets: np.ndarray  # [n_tiles + 1] int64
     ids: np.ndarray  # [n_isect] int32, indices into the visible Gaussians, front to back per tile
+    row_start: np.ndarray  # [m + 1] int64: Gaussian g's list positions are rows[row_start[g]:row_start[g+1]]
+    rows: np.ndarray  # [n_isect] int64, increasing per Gaussian
     tiles_x: int
     tiles_y: int
     tile_size: int = TILE_SIZE
@@ -45,20 +47,28 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
     """Tile lists for (visible) Gaussians, each list sorted by depth (ties: lower index first)."""
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
-    m2d = np.ascontiguousarray(means2d.detach().cpu().numpy().astype(np.float64, copy=False))
-    rad = np.ascontiguousarray(radii.detach().cpu().numpy().astype(np.int64, copy=False))
+    m2d = _np(means2d)
+    rad = _np(radii)
     if m2d.shape[0] == 0:
-        return TileBins(np.zeros(tiles_x * tiles_y + 1, np.int64), np.zeros(0, np.int32), tiles_x, tiles_y,
-                        tile_size)
-    order = kernels.depth_order(np.ascontiguousarray(depths.detach().cpu().numpy()))
+        return TileBins(np.zeros(tiles_x * tiles_y + 1, np.int64), np.zeros(0, np.int32), np.zeros(1, np.int64),
+                        np.zeros(0, np.int64), tiles_x, tiles_y, tile_size)
+    order = kernels.depth_order(_np(depths))
     with _KernelScope(chunk=0, items=m2d.shape[0]):
-        rects = kernels.tile_rects(m2d, rad, tile_size, tiles_x, tiles_y)
-        offsets, ids = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
-    return TileBins(offsets, ids, tiles_x, tiles_y, tile_size)
+        rects = kernels.tile_rects(m2d, rad, order, tile_size, tiles_x, tiles_y)
+        offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+    return TileBins(offsets, ids, row_start, rows, tiles_x, tiles_y, tile_size)
 
 
 def _np(t: torch.Tensor) -> np.ndarray:
     return np.ascontiguousarray(t.detach().cpu().numpy())
+
+
+def _take_np(a: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``a[rows]`` for a 2D array by the parallel kernel."""
+    out = np.empty((rows.shape[0], a.shape[1]), a.dtype)
+    with _KernelScope(chunk=0, items=rows.shape[0]):
+        kernels.take_rows(a, rows, out)
+    return out
 
 
 class RasterizePixels(torch.autograd.Function):
@@ -81,6 +91,7 @@ class RasterizePixels(torch.autograd.Function):
         with _KernelScope(items=bins.n_isect, serial_below=8192):
             kernels.rasterize_fwd(*args, out_color, out_T, out_inst, out_last)
         ctx.args = args
+        ctx.bins = bins
         ctx.outs = (out_color, out_T, out_inst, out_last)
         ctx.shapes = (means2d.shape[0], C, G, dtype, means2d.device)
         color = torch.from_numpy(out_color).to(means2d.device)
@@ -105,23 +116,54 @@ class RasterizePixels(torch.autograd.Function):
         ga = grad_np(g_alpha, (H, W))
         gi = grad_np(g_inst, (H, W, G)) if G > 0 else np.zeros((H, W, 1), np_dtype)
         n_isect = args[7].shape[0]
-        r_m2d = np.zeros((n_isect, 2), np_dtype)
-        r_conic = np.zeros((n_isect, 3), np_dtype)
-        r_opac = np.zeros(n_isect, np_dtype)
-        r_color = np.zeros((n_isect, C), np_dtype)
+        r = np.zeros((n_isect, 6 + C), np_dtype)  # one row per intersection: 2D mean, conic, opacity, colour
         with _KernelScope(items=n_isect, serial_below=8192):
             kernels.rasterize_bwd(*args, out_color, out_T, out_inst, out_last, gc, ga, gi,
-                                  r_m2d, r_conic, r_opac, r_color)
-        g_m2d = np.zeros((m, 2), np.float64)
-        g_conic = np.zeros((m, 3), np.float64)
-        g_opac = np.zeros(m, np.float64)
-        g_col = np.zeros((m, C), np.float64)
-        kernels.reduce_rows(args[7], r_m2d, r_conic, r_opac, r_color, g_m2d, g_conic, g_opac, g_col)
+                                  r[:, 0:2], r[:, 2:5], r[:, 5], r[:, 6:])
+        bins = ctx.bins
+        g_m2d = np.empty((m, 2), np_dtype)
+        g_conic = np.empty((m, 3), np_dtype)
+        g_opac = np.empty(m, np_dtype)
+        g_col = np.empty((m, C), np_dtype)
+        with _KernelScope(chunk=0, items=m):
+            kernels.reduce_rows(bins.row_start, bins.rows, r, g_m2d, g_conic, g_opac, g_col)
 
         def t(a):
             return torch.from_numpy(a).to(device=device, dtype=dtype)
 
         return t(g_m2d), t(g_conic), t(g_opac), t(g_col), None, None, None, None, None, None
+
+
+class TakeRows(torch.autograd.Function):
+    """``[t[rows] for t in tensors]`` (float, first dim N) by a numba kernel; the backward writes each
+    full [N, ...] gradient in one pass (zeros where not taken) instead of zero-filling and scattering."""
+
+    @staticmethod
+    def forward(ctx, rows, pos, *tensors):
+        ctx.pos = pos
+        ctx.shapes = [(t.shape, t.dtype, t.device) for t in tensors]
+        out = []
+        with _KernelScope(chunk=0, items=rows.shape[0]):
+            for t in tensors:
+                src = _np(t).reshape(t.shape[0], math.prod(t.shape[1:]))
+                dst = np.empty((rows.shape[0], src.shape[1]), src.dtype)
+                kernels.take_rows(src, rows, dst)
+                out.append(torch.from_numpy(dst.reshape((rows.shape[0],) + tuple(t.shape[1:]))).to(t.device))
+        return tuple(out)
+
+    @staticmethod
+    def backward(ctx, *grads):
+        out = []
+        with _KernelScope(chunk=0, items=ctx.pos.shape[0]):
+            for g, (shape, dtype, device) in zip(grads, ctx.shapes):
+                if g is None:
+                    out.append(None)
+                    continue
+                src = _np(g.to(dtype)).reshape(g.shape[0], math.prod(shape[1:]))
+                dst = np.empty((shape[0], src.shape[1]), src.dtype)
+                kernels.put_rows(src, ctx.pos, dst)
+                out.append(torch.from_numpy(dst.reshape(shape)).to(device))
+        return (None, None, *out)
 
 
 def _rows_finite(a: torch.Tensor, backend: str) -> torch.Tensor:
@@ -247,34 +289,51 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
     proj = project_gaussians(means, quats, scales, opacities, viewmat, K, width, height, near=near, far=far,
                              eps2d=eps2d, antialiased=antialiased, extent=extent,
                              alpha_threshold=alpha_threshold, finite_mask=col_finite, backend=backend)
-    vis = torch.nonzero(proj.visible, as_tuple=False).squeeze(1)
-    if is_sh:
-        sh_v = colors[vis]
-        feats = sh_to_color(deg, sh_v, proj.rel_means[vis], backend=backend).to(colors.dtype)
-    else:
-        feats = colors[vis]
-    n_color = feats.shape[1]
-    depths_v = proj.depths[vis]
-    if render_depth:
-        feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
-    dtype = means.dtype
-    feats = feats.to(dtype)
-    m2d = proj.means2d[vis]
-    conics = proj.conics[vis]
-    opac = proj.opacities[vis]
     G = int(n_groups) if groups is not None else 0
-    grp = groups[vis] if G > 0 else torch.zeros(0, dtype=torch.int64, device=device)
-
+    dtype = means.dtype
     bins = None
     if backend == "numba":
-        bins = bin_gaussians(m2d, proj.radii[vis], depths_v, width, height)
+        # the visible rows are read in place by numba passes (SH colour, one gather of the 2D geometry)
+        # whose backward writes the full-size gradients once: no [N, K, 3] copies, no zero-fill + scatter
+        rows = np.flatnonzero(_np(proj.visible))
+        pos = np.full(n, -1, np.int64)
+        pos[rows] = np.arange(rows.shape[0])
+        take = (proj.means2d, proj.conics, proj.opacities, proj.depths)
+        if is_sh:
+            feats = sh_to_color(deg, colors, proj.rel_means, backend=backend, rows=rows).to(colors.dtype)
+            m2d, conics, opac, depths_v = TakeRows.apply(rows, pos, *take)
+        else:
+            m2d, conics, opac, depths_v, feats = TakeRows.apply(rows, pos, *take, colors)
+        radii_v = _take_np(_np(proj.radii), rows)
+        grp = (torch.from_numpy(_take_np(_np(groups.to(torch.int64))[:, None], rows)[:, 0]) if G > 0
+               else torch.zeros(0, dtype=torch.int64))
+        n_color = feats.shape[1]
+        if render_depth:
+            feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
+        feats = feats.to(dtype)
+        bins = bin_gaussians(m2d, torch.from_numpy(radii_v), depths_v, width, height)
         n_isect = bins.n_isect
         out, alpha, inst = RasterizePixels.apply(m2d, conics, opac, feats, grp, G, bins, width, height,
                                                  alpha_threshold)
+        n_visible = int(rows.shape[0])
     else:
         from .reference import rasterize_pixels_torch
-        out, alpha, inst, n_isect = rasterize_pixels_torch(m2d, conics, opac, feats, grp, G, width, height,
-                                                           alpha_threshold, proj.radii[vis], depths_v)
+
+        vis = torch.nonzero(proj.visible, as_tuple=False).squeeze(1)
+        if is_sh:
+            feats = sh_to_color(deg, colors[vis], proj.rel_means[vis], backend=backend).to(colors.dtype)
+        else:
+            feats = colors[vis]
+        n_color = feats.shape[1]
+        depths_v = proj.depths[vis]
+        if render_depth:
+            feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
+        feats = feats.to(dtype)
+        grp = groups[vis] if G > 0 else torch.zeros(0, dtype=torch.int64, device=device)
+        out, alpha, inst, n_isect = rasterize_pixels_torch(proj.means2d[vis], proj.conics[vis], proj.opacities[vis],
+                                                           feats, grp, G, width, height, alpha_threshold,
+                                                           proj.radii[vis], depths_v)
+        n_visible = int(vis.numel())
     alpha = alpha[..., None]
     rgb = out[..., :n_color]
     if background is not None:
@@ -282,7 +341,7 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         rgb = rgb + (1.0 - alpha) * bg
     info = {"radii": proj.radii, "means2d": proj.means2d, "depths": proj.depths, "conics": proj.conics,
             "opacities": proj.opacities, "visible": proj.visible, "n_isect": n_isect, "bins": bins,
-            "n_visible": int(vis.numel()), "backend": backend, "camera_center": proj.camera_center,
+            "n_visible": n_visible, "backend": backend, "camera_center": proj.camera_center,
             "width": width, "height": height}
     if render_depth:
         d = out[..., n_color:n_color + 1]

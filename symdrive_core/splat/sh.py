@@ -77,20 +77,24 @@ def sh_to_color_torch(degree: int, sh: torch.Tensor, dirs: torch.Tensor) -> torc
 
 
 class SHColor(torch.autograd.Function):
-    """Numba SH evaluation: (sh [N,K,C], dirs [N,3]) -> [N,C] in sh's dtype (clamp: the colour).
-    float32 or float64 storage is read directly; the arithmetic is float64."""
+    """Numba SH evaluation: (sh [N,K,C], dirs [N,3]) -> [M,C] in sh's dtype (clamp: the colour) for
+    the rows ``rows`` (int64 numpy, None: all N). float32 or float64 storage is read directly, the
+    arithmetic is float64; the gradients come back as full [N,...] arrays (zero rows where not picked)
+    without a gathered copy of the coefficients either way."""
 
     @staticmethod
-    def forward(ctx, sh, dirs, degree, clamp):
+    def forward(ctx, sh, dirs, degree, clamp, rows=None):
         from . import proj_kernels as pk
         from .numba_scope import KernelScope
         from .projection import _arr, _np_dtype
 
-        out = np.empty((sh.shape[0], sh.shape[2]), _np_dtype(sh.dtype))
-        with KernelScope(chunk=0, items=sh.shape[0]):
-            pk.sh_fwd(int(degree), _arr(sh), _arr(dirs), bool(clamp), out)
+        n = sh.shape[0]
+        rows = np.arange(n, dtype=np.int64) if rows is None else rows
+        out = np.empty((rows.shape[0], sh.shape[2]), _np_dtype(sh.dtype))
+        with KernelScope(chunk=0, items=rows.shape[0]):
+            pk.sh_fwd(int(degree), _arr(sh), _arr(dirs), rows, bool(clamp), out)
         ctx.save_for_backward(sh, dirs)
-        ctx.opts = (int(degree), bool(clamp))
+        ctx.opts = (int(degree), bool(clamp), rows)
         return torch.from_numpy(out).to(device=sh.device, dtype=sh.dtype)
 
     @staticmethod
@@ -100,13 +104,16 @@ class SHColor(torch.autograd.Function):
         from .projection import _arr, _np_dtype
 
         sh, dirs = ctx.saved_tensors
-        degree, clamp = ctx.opts
-        d_sh = np.zeros(tuple(sh.shape), _np_dtype(sh.dtype))
+        degree, clamp, rows = ctx.opts
+        n = sh.shape[0]
+        pos = np.full(n, -1, np.int64)
+        pos[rows] = np.arange(rows.shape[0])
+        d_sh = np.empty(tuple(sh.shape), _np_dtype(sh.dtype))
         d_dirs = np.empty(tuple(dirs.shape), _np_dtype(dirs.dtype))
-        with KernelScope(chunk=0, items=sh.shape[0]):
-            pk.sh_bwd(degree, _arr(sh), _arr(dirs), clamp, _arr(g_out), d_sh, d_dirs)
+        with KernelScope(chunk=0, items=n):
+            pk.sh_bwd(degree, _arr(sh), _arr(dirs), pos, clamp, _arr(g_out), d_sh, d_dirs)
         return (torch.from_numpy(d_sh).to(device=sh.device, dtype=sh.dtype),
-                torch.from_numpy(d_dirs).to(device=dirs.device, dtype=dirs.dtype), None, None)
+                torch.from_numpy(d_dirs).to(device=dirs.device, dtype=dirs.dtype), None, None, None)
 
 
 def _use_numba(sh: torch.Tensor, dirs: torch.Tensor, backend: str) -> bool:
@@ -125,9 +132,14 @@ def eval_sh(degree: int, sh: torch.Tensor, dirs: torch.Tensor, backend: str = "a
     return SHColor.apply(sh, dirs, int(degree), False)
 
 
-def sh_to_color(degree: int, sh: torch.Tensor, dirs: torch.Tensor, backend: str = "auto") -> torch.Tensor:
-    """Colour ``max(eval_sh + 0.5, 0)`` as 3DGS and gsplat define it."""
+def sh_to_color(degree: int, sh: torch.Tensor, dirs: torch.Tensor, backend: str = "auto",
+                rows: np.ndarray | None = None) -> torch.Tensor:
+    """Colour ``max(eval_sh + 0.5, 0)`` as 3DGS and gsplat define it; ``rows`` (int64 indices): only
+    those Gaussians, same as ``sh_to_color(degree, sh[rows], dirs[rows])`` without the copies."""
     if not _use_numba(sh, dirs, backend):
+        if rows is not None:
+            idx = torch.from_numpy(rows).to(sh.device)
+            sh, dirs = sh[idx], dirs[idx]
         return sh_to_color_torch(degree, sh, dirs)
     _check(degree, sh)
-    return SHColor.apply(sh, dirs, int(degree), True)
+    return SHColor.apply(sh, dirs, int(degree), True, rows)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from symdrive_core.splat import kernels, kernels_baseline
+from symdrive_core.splat import kernels, kernels_baseline, rasterize_baseline
 
 THRESHOLD = 1.0 / 255.0
 N_GROUPS = 3
@@ -51,8 +51,8 @@ def scene_2d(n, width, height, seed, kind):
 def bins_of(means, radii, depths, width, height):
     tiles_x = (width + kernels.TILE - 1) // kernels.TILE
     tiles_y = (height + kernels.TILE - 1) // kernels.TILE
-    rects = kernels.tile_rects(means, radii, kernels.TILE, tiles_x, tiles_y)
-    offsets, ids = kernels.bin_tiles(np.argsort(depths, kind="stable"), rects, tiles_x, tiles_y)
+    rects = rasterize_baseline.tile_rects(means, radii, kernels.TILE, tiles_x, tiles_y)
+    offsets, ids = rasterize_baseline.bin_tiles(np.argsort(depths, kind="stable"), rects, tiles_x, tiles_y)
     return offsets, ids, tiles_x
 
 
@@ -146,15 +146,31 @@ def test_depth_order_is_a_stable_argsort(dtype):
     np.testing.assert_array_equal(kernels.depth_order(depths), np.argsort(depths, kind="stable"))
 
 
-def test_parallel_binning_keeps_the_depth_order_in_every_tile():
-    means, conics, opac, colors, groups, radii, depths = scene_2d(3000, 200, 120, 4, "mixed")
-    offsets, ids, tiles_x = bins_of(means, radii, depths, 200, 120)
-    rects = kernels.tile_rects(means, radii, kernels.TILE, tiles_x, (120 + 15) // 16)
-    order = np.argsort(depths, kind="stable")
-    for t in range(offsets.shape[0] - 1):
-        tx, ty = t % tiles_x, t // tiles_x
-        inside = (rects[order, 0] <= tx) & (tx < rects[order, 1]) & (rects[order, 2] <= ty) & (ty < rects[order, 3])
-        np.testing.assert_array_equal(ids[offsets[t]:offsets[t + 1]], order[inside])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_binning_and_reduction_match_the_baseline(dtype):
+    """Depth-ordered rectangles and Gaussian-ordered gradient rows give the baseline's tile lists and,
+    bit for bit, its serial per-Gaussian sums."""
+    width, height = 200, 120
+    means, conics, opac, colors, groups, radii, depths = scene_2d(3000, width, height, 4, "mixed")
+    radii[::7] = 0  # culled Gaussians: no tiles, zero gradient
+    offsets_b, ids_b, tiles_x = bins_of(means, radii, depths, width, height)
+    tiles_y = (height + 15) // 16
+    order = kernels.depth_order(depths.astype(dtype))
+    rects = kernels.tile_rects(means.astype(dtype), radii.astype(np.int32), order, kernels.TILE, tiles_x, tiles_y)
+    offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+    np.testing.assert_array_equal(offsets, offsets_b)
+    np.testing.assert_array_equal(ids, ids_b)
+    m, n_isect = means.shape[0], ids.shape[0]
+    for g in range(m):  # Gaussian g's list positions, increasing
+        np.testing.assert_array_equal(rows[row_start[g]:row_start[g + 1]], np.flatnonzero(ids == g))
+    packed = np.random.default_rng(9).normal(size=(n_isect, 10)).astype(dtype)
+    r = [packed[:, 0:2], packed[:, 2:5], packed[:, 5], packed[:, 6:]]
+    want = [np.zeros((m,) + a.shape[1:]) for a in r]
+    rasterize_baseline.reduce_rows(ids, *r, *want)
+    got = [np.empty((m,) + a.shape[1:], dtype) for a in r]
+    kernels.reduce_rows(row_start, rows, packed, *got)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b.astype(dtype))
 
 
 def test_vector_exp_is_within_two_ulp_of_libm():
