@@ -395,11 +395,14 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
     for key in ("train_frames", "heldout_frames"):
         for i, f in enumerate(gt.get(key, [])):
             frame(f, f"ground_truth.{key}[{i}]")
-    for li, e in enumerate(gt.get("lateral", [])):
-        if "camera" in e:
-            camera(e["camera"], f"ground_truth.lateral[{li}].camera")
-        for k in e["frames"]:
-            frame(k, f"ground_truth.lateral[{li}].frames.{k}")
+    def lateral(entries, where):
+        for li, e in enumerate(entries):
+            if "camera" in e:
+                camera(e["camera"], f"{where}[{li}].camera")
+            for k in e["frames"]:
+                frame(k, f"{where}[{li}].frames.{k}")
+
+    lateral(gt.get("lateral", []), "ground_truth.lateral")
     lanes = gt.get("lanes", {})
     if lanes and "road" not in gt:
         rd.fail("ground_truth.lanes", "lane masks are scored inside the road: ground_truth.road is missing")
@@ -407,11 +410,7 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
         camera(lanes["camera"], "ground_truth.lanes.camera")
     for k in lanes.get("recorded", {}):
         frame(k, f"ground_truth.lanes.recorded.{k}")
-    for li, e in enumerate(lanes.get("lateral", [])):
-        if "camera" in e:
-            camera(e["camera"], f"ground_truth.lanes.lateral[{li}].camera")
-        for k in e["frames"]:
-            frame(k, f"ground_truth.lanes.lateral[{li}].frames.{k}")
+    lateral(lanes.get("lateral", []), "ground_truth.lanes.lateral")
     for ii, e in enumerate(gt.get("insertion", [])):
         if "camera" in e:
             camera(e["camera"], f"ground_truth.insertion[{ii}].camera")
