@@ -21,7 +21,6 @@ _EXPORTS = {
     "Layer": ".compose",
     "render_layers": ".compose",
     "render_oracle": ".oracle",
-    "rasterize_reference": ".reference",
     "project_gaussians": ".projection",
 }
 

@@ -136,11 +136,3 @@ def rasterize_pixels_torch(means2d, conics, opac, feats, groups, n_groups: int, 
     alpha = assemble([a[..., None] for a in alphas], 1)[..., 0]
     inst = assemble(insts, G)
     return color, alpha, inst, int(offsets[-1])
-
-
-def rasterize_reference(*args, **kwargs):
-    """``rasterize`` with ``backend="torch"``."""
-    from .rasterize import rasterize
-
-    kwargs["backend"] = "torch"
-    return rasterize(*args, **kwargs)

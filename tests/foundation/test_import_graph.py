@@ -14,9 +14,8 @@ Two kinds of import, two rules:
   No circle is allowed at this level.
 * **Function level** (inside a ``def`` or ``lambda``): how the project defers heavy imports (torch,
   diffusers) until a command needs them. A circle that uses one of these edges works at run time,
-  but it still says two modules share a helper that has no home of its own. The ones known today
-  are listed in ``DEFERRED_CYCLES`` with the home ``LAYOUT.md`` gives the shared helper; a new
-  one, or a known one growing, fails. When one is fixed, remove it from the list (the test says so).
+  but it still says two modules share a helper that has no home of its own, so it fails too: give
+  the shared helper its own module.
 
 ``symdrive_core.cli`` is the command line: only modules inside ``cli/`` may import it, at either
 level (and not through ``importlib.import_module`` either). The library keeps its own defaults
@@ -32,15 +31,6 @@ import symdrive_core
 
 ROOT = Path(symdrive_core.__file__).parent
 CLI = "symdrive_core.cli"
-
-# Circles that close only through a function-level import, each with the module that should own
-# the helper they share (see LAYOUT.md). A new circle fails; so does a listed one that has gone.
-DEFERRED_CYCLES = {
-    # rasterize falls back to the pure-torch reference, which calls rasterize for its tile set-up:
-    # one render entry (splat/render.py) over both.
-    frozenset({"symdrive_core.splat.rasterize", "symdrive_core.splat.reference"}),
-}
-
 
 def _modules() -> dict[str, tuple[Path, bool]]:
     """Dotted name -> (file, is a package ``__init__``) for every module of ``symdrive_core``."""
@@ -184,9 +174,6 @@ def test_no_import_cycle_at_module_level():
     assert cycles == [], f"modules importing each other at module level: {cycles}"
 
 
-def test_no_new_cycle_through_deferred_imports():
-    cycles = set(_cycles(EVERY))
-    new = [sorted(c) for c in cycles - DEFERRED_CYCLES]
-    assert new == [], f"a new import circle (move the shared helper where LAYOUT.md says): {new}"
-    gone = [sorted(c) for c in DEFERRED_CYCLES - cycles]
-    assert gone == [], f"fixed, so remove from DEFERRED_CYCLES: {gone}"
+def test_no_cycle_through_deferred_imports_either():
+    cycles = [sorted(c) for c in _cycles(EVERY)]
+    assert cycles == [], f"an import circle (move the shared helper to a module of its own): {cycles}"
