@@ -8,7 +8,7 @@ The package holds the training drive (images, z-depth, OpenCV cameras), the same
 shifted sideways by +/-0.5 .. 3 m, held-out vehicle insertions (with / without / mask /
 shadow mask), a coloured point cloud of the scene surfaces, and three vehicle assets in the
 3DRealCar layout. ``ground_truth`` in ``manifest.json`` indexes all of it (see
-``symdrive_core.world.package``). Same seed and settings give the same scene and cameras.
+``symdrive_core.scene.ground_truth``). Same seed and settings give the same scene and cameras.
 """
 
 from __future__ import annotations

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from symdrive_core import conventions
+from symdrive_core.insertion.surface import sample_surface, surface_splats, surfel_spacing, triangle_areas
 from symdrive_core.io.atomic import write_text_atomic
 from symdrive_core.io.ply import write_splats
 from symdrive_core.world.obj import write_obj
-from symdrive_core.world.sampling import sample_surface, surface_splats, surfel_spacing, triangle_areas
 
 from .meshdata import object_triangles
 

@@ -24,11 +24,11 @@ import bpy
 import numpy as np
 
 from symdrive_core import conventions
+from symdrive_core.insertion.surface import sample_surface
 from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.io.points import write_points
 from symdrive_core.scene import Actor, Camera, CameraFrame, Effects, Frame, Manifest, MaskEntry, Pose
 from symdrive_core.world.projection import colour_points
-from symdrive_core.world.sampling import sample_surface
 
 from . import drive, lanes, render
 from .assets import export_car

@@ -56,7 +56,7 @@ def make_pairs(
     from safetensors.numpy import save_file
     from tqdm import tqdm
 
-    from ..world.package import split_frames
+    from ..scene.ground_truth import split_frames
 
     offsets = [float(d) for d in offsets]
     if not offsets or any(d <= 0 for d in offsets):

@@ -52,8 +52,8 @@ def refine_gaussians(
         make_optimizer,
         scene_extent,
     )
+    from ..scene.ground_truth import split_frames
     from ..splat.render import params_from_gaussians, render_params
-    from ..world.package import split_frames
 
     cfg = cfg or RefineConfig()
     gt_views = load_views(manifest, split_frames(manifest)[0], depth=cfg.depth_weight > 0)

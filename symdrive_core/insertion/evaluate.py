@@ -25,7 +25,7 @@ from ..metrics import bbox_crop, psnr, ssim
 from ..optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
 from ..scene import Manifest
 from ..scene.camera import CameraView
-from ..world.package import split_frames
+from ..scene.ground_truth import split_frames
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
 from .cast_shadow import CastShadow, vehicle_shadow

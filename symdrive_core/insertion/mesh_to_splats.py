@@ -30,7 +30,7 @@ import numpy as np
 from ..conventions import linear_to_srgb, srgb_to_linear
 from ..errors import InputError
 from ..gaussians import Gaussians
-from ..world.sampling import sample_surface, surface_splats, surfel_spacing, triangle_areas
+from ..insertion.surface import sample_surface, surface_splats, surfel_spacing, triangle_areas
 
 DEFAULT_COLOR = (0.5, 0.5, 0.5)
 

@@ -16,8 +16,8 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
+from ..scene.ground_truth import lateral_views, split_frames
 from ..splat.render import SplatRenderer, render_gaussians
-from ..world.package import lateral_views, split_frames
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,

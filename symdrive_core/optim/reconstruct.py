@@ -26,8 +26,8 @@ from ..io.images import read_image
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
+from ..scene.ground_truth import split_frames
 from ..splat.render import params_from_gaussians, render_params
-from ..world.package import split_frames
 from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
 from .losses import photometric
 

@@ -139,9 +139,9 @@ def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool,
     from ..io.images import read_image
     from ..io.ply import read_splats
     from ..scene import load_manifest
+    from ..scene.ground_truth import lateral_views
     from ..splat.render import SplatRenderer
     from ..splat.tensors import GaussianTensors
-    from ..world.package import lateral_views
     from .report import write_report_json
     from .run import run_scene
 

@@ -55,8 +55,8 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     """Each rasterizer option against Cycles on held-out frames (render time per frame)."""
     from ..conventions import scale_intrinsics
     from ..io.images import read_image
+    from ..scene.ground_truth import split_frames
     from ..splat.render import params_from_gaussians, render_params
-    from ..world.package import split_frames
 
     cam = manifest.cameras[0]
     frames = spread(split_frames(manifest)[1], budget.render_frames)
@@ -115,7 +115,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
     from ..diffusion.restore import run_lateral_restoration
     from ..diffusion.sampler import SamplerConfig
     from ..optim.evaluate import evaluate_lateral
-    from ..world.package import lateral_views, with_lateral_offsets
+    from ..scene.ground_truth import lateral_views, with_lateral_offsets
 
     scoped = with_lateral_offsets(manifest, budget.offsets)
     frames = spread(sorted({v.frame for v in lateral_views(scoped)}), budget.restore_frames)
@@ -267,7 +267,7 @@ def package_settings(manifest, quick: bool = False) -> tuple[list[Setting], dict
     """Every knob the package's ground truth can score, and why the others are left out."""
     from ..diffusion.models import load_restorer
     from ..io.ply import read_splats
-    from ..world.package import split_frames
+    from ..scene.ground_truth import split_frames
 
     budget = QUICK if quick else Budget()
     if not manifest.background_splats:

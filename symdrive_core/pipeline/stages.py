@@ -156,8 +156,8 @@ def restore_stage(ctx) -> StageResult:
     )
     from ..io.images import read_image, write_image
     from ..optim.evaluate import evaluate_lateral
+    from ..scene.ground_truth import with_lateral_offsets
     from ..splat.render import SplatRenderer
-    from ..world.package import with_lateral_offsets
 
     m, opts = ctx.manifest, ctx.options
     g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
@@ -309,7 +309,7 @@ def evaluate_stage(ctx) -> StageResult:
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..optim.evaluate import evaluate_heldout
     from ..optim.finetune import FinetuneConfig
-    from ..world.package import split_frames
+    from ..scene.ground_truth import split_frames
 
     m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
     has_background = background_path(ctx) is not None

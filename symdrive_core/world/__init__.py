@@ -1,6 +1,4 @@
-"""The built-in street world: bpy-free helpers to build and read its scene packages.
-
-``scripts/make_world.py`` (inside Blender) generates a package; these modules do the parts
-that need only numpy: surface sampling, point-cloud PLY files, projection colouring, and
-readers for the package's ``ground_truth`` block.
+"""The built-in street world: bpy-free helpers ``scripts/make_world.py`` uses to build its scene
+package (an OBJ writer for the assets, projection colouring of the SfM-like points). The library
+itself never imports this package; it reads ground truth through :mod:`symdrive_core.scene.ground_truth`.
 """

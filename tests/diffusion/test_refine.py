@@ -5,7 +5,7 @@ from symdrive_core.diffusion.restore import RestoredView
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.optim.evaluate import evaluate_lateral
 from symdrive_core.scene import load_manifest
-from symdrive_core.world.package import lateral_views
+from symdrive_core.scene.ground_truth import lateral_views
 from tests.optim.conftest import render_truth, synthetic_package  # noqa: F401  (fixture)
 
 
@@ -55,8 +55,8 @@ def _depth_error(manifest, gaussians) -> float:
     import torch
 
     from symdrive_core.optim.reconstruct import depth_loss, load_views
+    from symdrive_core.scene.ground_truth import split_frames
     from symdrive_core.splat.render import params_from_gaussians, render_params
-    from symdrive_core.world.package import split_frames
 
     params = params_from_gaussians(gaussians, gaussians.sh_degree)
     with torch.no_grad():

@@ -15,7 +15,7 @@ from symdrive_core.optim.reconstruct import (
     scene_extent,
 )
 from symdrive_core.scene import load_manifest
-from symdrive_core.world.package import split_frames
+from symdrive_core.scene.ground_truth import split_frames
 
 
 def _cfg(**kw):

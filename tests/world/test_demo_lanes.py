@@ -10,7 +10,7 @@ from symdrive_core.errors import InputError
 from symdrive_core.io.images import read_image
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
-from symdrive_core.world.package import lane_masks, lane_truth, lateral_views
+from symdrive_core.scene.ground_truth import lane_masks, lane_truth, lateral_views
 
 MANIFEST = load_manifest(DEMO_PACKAGE)
 RECORDED = [0, 7, 14, 21, 28]
@@ -73,7 +73,7 @@ def test_lateral_rows_carry_lane_iou_and_its_ceiling():
     it, the segmenter's IoU on the Cycles images of the same views."""
     from symdrive_core.io.ply import read_splats
     from symdrive_core.optim.evaluate import evaluate_lateral
-    from symdrive_core.world.package import with_lateral_offsets
+    from symdrive_core.scene.ground_truth import with_lateral_offsets
 
     scoped = with_lateral_offsets(MANIFEST, [-3.0, 3.0])
     rows = evaluate_lateral(scoped, read_splats(MANIFEST.resolve(MANIFEST.background_splats)), "raw_3dgs", [12])

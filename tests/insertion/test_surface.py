@@ -1,13 +1,13 @@
 import numpy as np
 import pytest
 
-from symdrive_core.rotations import quat_to_matrix, quats_z_to
-from symdrive_core.world.sampling import (
+from symdrive_core.insertion.surface import (
     sample_surface,
     surface_splats,
     surfel_spacing,
     triangle_areas,
 )
+from symdrive_core.rotations import quat_to_matrix, quats_z_to
 
 # a unit square (two triangles, area 1) at z = 0 and a 2x1 rectangle at x = 5 (area 2)
 VERTS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],

@@ -1,7 +1,7 @@
 import numpy as np
 
 from symdrive_core.scene import parse_manifest
-from symdrive_core.world.package import lateral_views, split_frames
+from symdrive_core.scene.ground_truth import lateral_views, split_frames
 from tests.conftest import manifest_dict
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import conventions
-from ..scene import Manifest
+from .manifest import Manifest
 
 
 def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int], list[int]]:
