@@ -177,3 +177,10 @@ def test_no_import_cycle_at_module_level():
 def test_no_cycle_through_deferred_imports_either():
     cycles = [sorted(c) for c in _cycles(EVERY)]
     assert cycles == [], f"an import circle (move the shared helper to a module of its own): {cycles}"
+
+
+def test_the_library_does_not_import_the_demo_world():
+    world = "symdrive_core.world"
+    bad = sorted(f"{m} imports {t}" for m, targets in EVERY.items() if not (m == world or m.startswith(world + "."))
+                 for t in targets if t == world or t.startswith(world + "."))
+    assert bad == [], "symdrive_core.world builds the demo package only:\n" + "\n".join(bad)
