@@ -251,9 +251,11 @@ def run_lateral_restoration(
     sampler: SamplerConfig = DEFAULT,
     frames: list[int] | None = None,
     progress: bool = True,
+    warper=None,
 ) -> LateralRestoration:
     """Restore every lateral ground-truth view of the package (or of ``frames``) with each
-    method, score it against the Cycles image, and keep the restored views."""
+    method, score it against the Cycles image, and keep the restored views. ``warper``: the
+    lateral camera's, for the geometry-guided methods (default: fitted here when they are asked for)."""
     from tqdm import tqdm
 
     targets = _targets(manifest, frames)
@@ -263,7 +265,8 @@ def run_lateral_restoration(
             method_step(m)  # an unknown name fails before any work
     render = SplatRenderer(gaussians)
     cam = lateral_camera(manifest)
-    warper = _warper(manifest, cam, gaussians) if needs_warp(methods) else None
+    if warper is None and needs_warp(methods):
+        warper = _warper(manifest, cam, gaussians)
     scores: dict[tuple[float, str], list] = {}
     ceilings: dict[float, list[float]] = {}
     seconds: dict[str, list[float]] = {}
