@@ -7,9 +7,10 @@ that need no diffusion model never pay for (or depend on) them.
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
-from ..diffusion.defaults import CYCLE_DEFAULTS, SAMPLER_DEFAULTS
+from ..diffusion.defaults import CYCLE_DEFAULTS, EVALUATED_METHODS, SAMPLER_DEFAULTS
 from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_quiet_option, add_renamed_option, count_int, device_arg, positive_int
 
@@ -19,6 +20,16 @@ def _floats(text: str) -> list[float]:
         return [float(v) for v in text.split(",") if v.strip()]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from exc
+
+
+def _names(text: str) -> list[str]:
+    """Comma-separated lateral methods: single_view, ar_d<metres>, warp, and geo_ + the first two."""
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    bad = [n for n in names if not re.fullmatch(r"warp|(geo_)?(single_view|ar_d\d*\.?\d+)", n)]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"unknown method {bad[0] if bad else text!r} (expected single_view, "
+                                         "ar_d<metres>, warp, geo_single_view or geo_ar_d<metres>)")
+    return names
 
 
 def _distances(text: str) -> list[float]:
@@ -157,8 +168,14 @@ def add_commands(sub) -> None:
     p.add_argument(
         "--evaluate",
         action="store_true",
-        help="score raw / single-view / ar_d0.5 / ar_d1.0 against the package's lateral ground truth",
+        help="score raw 3DGS and each of --methods against the package's lateral ground truth",
     )
+    p.add_argument("--methods", type=_names, default=list(EVALUATED_METHODS),
+                   help="with --evaluate: comma-separated methods (default: " + ",".join(EVALUATED_METHODS) + "; "
+                        "warp = the recorded neighbours warped over the ground, geo_* = the chain guided by it)")
+    p.add_argument("--geometry-guided", action="store_true",
+                   help="restore (and --refine on) the views by the chain guided by the recorded neighbours "
+                        "warped over the ground (geo_ar_d<step>)")
     p.add_argument(
         "--refine",
         action="store_true",
@@ -335,7 +352,7 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 
     cam = lateral_camera(manifest)
     views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
-                                  sampler=sampler, progress=not args.quiet)
+                                  sampler=sampler, progress=not args.quiet, guided=args.geometry_guided)
     index = []
     for v in views:
         rel = f"{v.offset_m:+.2f}/{v.frame:06d}.png"
@@ -352,7 +369,7 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     from ..io.ply import write_splats
     from ..optim.evaluate import evaluate_lateral
 
-    methods = ("single_view", "ar_d0.5", "ar_d1.0")
+    methods = tuple(args.methods)
     t0 = time.perf_counter()
     result = run_lateral_restoration(
         manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames, progress=not args.quiet
@@ -367,7 +384,8 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
         # ones) at --offsets, restored by the chain with --step; scored chains are reused.
         t0 = time.perf_counter()
         views = restore_lateral_views(manifest, gaussians, restorer, args.refine_frames, args.offsets, args.step,
-                                      sampler=sampler, chains=result.chains, progress=not args.quiet)
+                                      sampler=sampler, chains=result.chains, progress=not args.quiet,
+                                      guided=args.geometry_guided)
         restore_seconds = round(time.perf_counter() - t0, 1)
         cfg = RefineConfig(iters=args.refine_iters)
         refined, stats = refine_gaussians(manifest, gaussians, views, cfg, progress=not args.quiet)

@@ -12,3 +12,6 @@ SAMPLER_DEFAULTS = {"builtin": (5, 4, 8), "flux": (50, 10, 1)}
 # (iterations, densification cap) of each cycle reconstruction (make-pairs --cycle); data.make_pairs'
 # and cycle.cycle_config's default too. About 1.5 minutes each on the built-in street.
 CYCLE_DEFAULTS = (1000, 60000)
+# The lateral methods ``restore --evaluate`` scores (see diffusion.restore): the restorer's ablation
+# and chains, the geometry-guided warp alone, and the same restorations guided by it.
+EVALUATED_METHODS = ("single_view", "ar_d0.5", "ar_d1.0", "warp", "geo_single_view", "geo_ar_d0.5", "geo_ar_d1.0")

@@ -9,6 +9,11 @@ equal steps, none longer than ``d``. The sampler starts at ``N_start`` from the 
 the target camera: it is the only input that sits exactly where the output must, which is the
 point of the paper's position-accurate initialisation. ``d = 0`` is the paper's single-view
 ablation: both conditions are the render at the target itself.
+
+Geometry-guided methods (``geo_single_view``, ``geo_ar_d<step>``) replace every render the chain
+uses (the start state and the far condition) by the recorded neighbours warped into that camera
+over the ground (:mod:`.warp`), the render kept where no frame sees the ground; ``warp`` is that
+image alone, with no restorer.
 """
 
 from __future__ import annotations
@@ -28,9 +33,13 @@ from ..scene.camera import CameraView
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
 
+WARP = "warp"
+GEO = "geo_"
+
 
 def method_step(method: str) -> float:
-    """``single_view`` -> 0; ``ar_d<step>`` -> step in metres."""
+    """``single_view`` -> 0; ``ar_d<step>`` -> step in metres; the same with the ``geo_`` prefix."""
+    method = method.removeprefix(GEO)
     if method == "single_view":
         return 0.0
     if method.startswith("ar_d"):
@@ -40,7 +49,12 @@ def method_step(method: str) -> float:
             step = -1.0
         if step > 0:
             return step
-    raise ValueError(f"unknown restoration method {method!r} (expected single_view or ar_d<metres>)")
+    raise ValueError(f"unknown restoration method {method!r} (expected single_view, ar_d<metres>, {WARP}, "
+                     f"or {GEO}single_view, {GEO}ar_d<metres>)")
+
+
+def needs_warp(methods) -> bool:
+    return any(m == WARP or m.startswith(GEO) for m in methods)
 
 
 def chain_positions(offset: float, step: float) -> list[float]:
@@ -60,22 +74,29 @@ class LateralChain:
         recorded: np.ndarray,
         camera: CameraView,
         sampler: SamplerConfig = DEFAULT,
+        warper=None,
+        frame: int | None = None,
     ):
+        """``warper`` (a :class:`~.warp.GroundWarper`) and ``frame`` (the recorded frame this
+        chain starts from) are needed only by the geometry-guided methods."""
         self.restorer, self.render, self.camera, self.sampler = restorer, render, camera, sampler
         self.recorded = recorded
+        self.warper, self.frame = warper, frame
         self._renders: dict[float, np.ndarray] = {}
-        self._restored: dict[tuple[float, float], np.ndarray] = {}
+        self._warps: dict[float, np.ndarray] = {}
+        self._restored: dict[tuple[bool, float, float], np.ndarray] = {}
         self.samples = 0
+        self.warp_seconds: list[float] = []  # per warp computed
 
     @classmethod
     def for_frame(cls, manifest: Manifest, cam, frame: int, restorer, render: SplatRenderer,
-                  sampler: SamplerConfig = DEFAULT) -> LateralChain:
+                  sampler: SamplerConfig = DEFAULT, warper=None) -> LateralChain:
         """The chain around recorded frame ``frame`` of the package's camera ``cam``; a frame with
         no recorded image starts from the render at its camera."""
         cf = cam.frames[frame]
         recorded = (read_image(manifest.resolve(cf.image), channels=3) if cf.image
                     else render(cf.K, cf.world_to_camera, cam.width, cam.height))
-        return cls(restorer, render, recorded, CameraView.of_frame(cam, frame), sampler)
+        return cls(restorer, render, recorded, CameraView.of_frame(cam, frame), sampler, warper, frame)
 
     def raw(self, offset: float) -> np.ndarray:
         key = round(offset, 6)
@@ -84,29 +105,53 @@ class LateralChain:
             self._renders[key] = self.render(v.K, v.world_to_camera, v.width, v.height)
         return self._renders[key]
 
+    def warp(self, offset: float) -> np.ndarray:
+        """The recorded neighbours warped to ``offset`` over the ground, the render elsewhere."""
+        key = round(offset, 6)
+        if key not in self._warps:
+            if self.warper is None:
+                raise ValueError("geometry-guided restoration needs a chain made with a warper")
+            t0 = time.perf_counter()
+            v = self.camera.shifted(offset)
+            depth = self.render.depth(v.K, v.world_to_camera, v.width, v.height, self.warper.config.min_alpha)
+            self._warps[key] = self.warper.warp(self.frame, v.K, v.camera_to_world, v.width, v.height,
+                                                self.raw(offset), depth).image
+            self.warp_seconds.append(time.perf_counter() - t0)
+        return self._warps[key]
+
+    def _start(self, offset: float, guided: bool) -> np.ndarray:
+        return self.warp(offset) if guided else self.raw(offset)
+
+    def by_method(self, offset: float, method: str) -> np.ndarray:
+        """The view at ``offset`` by a named method (see :func:`method_step` and ``warp``)."""
+        if method == WARP:
+            return self.recorded if offset == 0 else self.warp(offset)
+        return self.restore(offset, method_step(method), guided=method.startswith(GEO))
+
     def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray) -> np.ndarray:
         self.samples += 1
         return to_numpy(
             restore_image(self.restorer, to_tensor(left), to_tensor(right), to_tensor(init), self.sampler)
         )
 
-    def restore(self, offset: float, step: float) -> np.ndarray:
-        """The restored view at ``offset`` metres (positive = right) with chain step ``step``."""
+    def restore(self, offset: float, step: float, guided: bool = False) -> np.ndarray:
+        """The restored view at ``offset`` metres (positive = right) with chain step ``step``;
+        ``guided``: warps instead of renders as the start state and the far condition."""
         if offset == 0:
             return self.recorded
         if step == 0:
-            key = (0.0, round(offset, 6))
+            key = (guided, 0.0, round(offset, 6))
             if key not in self._restored:
-                r = self.raw(offset)
+                r = self._start(offset, guided)
                 self._restored[key] = self._sample(r, r, r)
             return self._restored[key]
         prev, prev_pos = self.recorded, 0.0
         for pos in chain_positions(offset, step):
-            key = (step, round(pos, 6))
+            key = (guided, step, round(pos, 6))
             if key not in self._restored:
-                far = self.raw(2 * pos - prev_pos)
+                far = self._start(2 * pos - prev_pos, guided)
                 left, right = (prev, far) if pos > 0 else (far, prev)
-                self._restored[key] = self._sample(left, right, self.raw(pos))
+                self._restored[key] = self._sample(left, right, self._start(pos, guided))
             prev, prev_pos = self._restored[key], pos
         return prev
 
@@ -155,23 +200,34 @@ def restore_lateral_views(
     sampler: SamplerConfig = DEFAULT,
     chains: dict[int, LateralChain] | None = None,
     progress: bool = True,
+    guided: bool = False,
 ) -> list[RestoredView]:
     """The views at ``+-offsets`` of each recorded frame in ``frames`` (default: all) of the lateral
-    camera, restored by the chain with step ``step``; ``chains`` (by frame) are reused, so views
-    already restored while scoring are not sampled again. Refinement trains on these."""
+    camera, restored by the chain with step ``step`` (``guided``: geometry-guided); ``chains`` (by
+    frame) are reused, so views already restored while scoring are not sampled again. Refinement
+    trains on these."""
     from tqdm import tqdm
 
     cam = lateral_camera(manifest)
     frames = range(len(cam.frames)) if frames is None else frames
     render = SplatRenderer(gaussians)
     chains = {} if chains is None else chains
+    warper = _warper(manifest, cam, gaussians) if guided else None
     signed = sorted({s * abs(o) for o in offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
     views = []
     for fi in tqdm(frames, desc="restore", unit="frame", disable=not progress):
         if fi not in chains:
-            chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
-        views += [RestoredView.shifted(cam, fi, off, chains[fi].restore(off, step)) for off in signed]
+            chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler, warper)
+        elif guided and chains[fi].warper is None:
+            chains[fi].warper = warper
+        views += [RestoredView.shifted(cam, fi, off, chains[fi].restore(off, step, guided)) for off in signed]
     return views
+
+
+def _warper(manifest: Manifest, cam, gaussians: Gaussians):
+    from .warp import package_warper
+
+    return package_warper(manifest, cam, gaussians)
 
 
 def run_lateral_restoration(
@@ -183,16 +239,22 @@ def run_lateral_restoration(
     sampler: SamplerConfig = DEFAULT,
     frames: list[int] | None = None,
     progress: bool = True,
+    warper=None,
 ) -> LateralRestoration:
     """Restore every lateral ground-truth view of the package (or of ``frames``) with each
-    method, score it against the Cycles image, and keep the restored views."""
+    method, score it against the Cycles image, and keep the restored views. ``warper``: the
+    lateral camera's, for the geometry-guided methods (default: fitted here when they are asked for)."""
     from tqdm import tqdm
 
     targets = lateral_targets(manifest, frames)
     truths = lane_truths(manifest, targets)
-    steps = {m: method_step(m) for m in methods}
+    for m in methods:
+        if m != WARP:
+            method_step(m)  # an unknown name fails before any work
     render = SplatRenderer(gaussians)
     cam = lateral_camera(manifest)
+    if warper is None and needs_warp(methods):
+        warper = _warper(manifest, cam, gaussians)
     scores: dict[tuple[float, str], list] = {}
     ceilings: dict[float, list[float]] = {}
     seconds: dict[str, list[float]] = {}
@@ -202,17 +264,18 @@ def run_lateral_restoration(
         by_frame.setdefault(v.frame, []).append(v)
     bar = tqdm(total=len(targets) * len(methods), desc="restore", unit="view", disable=not progress)
     for fi, views in sorted(by_frame.items()):
-        chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler)
+        chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler, warper)
         for v in sorted(views, key=lambda v: abs(v.offset_m)):
             gt = read_image(manifest.resolve(v.image), channels=3)
             lanes = with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
-            for method, step in steps.items():
+            for method in methods:
                 before, t0 = chain.samples, time.perf_counter()
-                img = chain.restore(v.offset_m, step)
+                img = chain.by_method(v.offset_m, method)
                 if chain.samples > before:
                     seconds.setdefault(method, []).append(
                         (time.perf_counter() - t0) / (chain.samples - before)
                     )
+
                 scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))
                 result.views.setdefault(method, []).append(
                     RestoredView(
@@ -221,6 +284,9 @@ def run_lateral_restoration(
                 )
                 bar.update()
     bar.close()
+    warp_seconds = [t for c in result.chains.values() for t in c.warp_seconds]
+    if WARP in methods and warp_seconds:  # the render at the shifted camera included
+        seconds[WARP] = warp_seconds
     result.rows = lateral_rows(scores, {m: float(np.mean(s)) for m, s in seconds.items()}, ceilings)
     return result
 

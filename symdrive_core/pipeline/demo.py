@@ -19,7 +19,7 @@ from .stages import StageOptions
 
 DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
-QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), eval_methods=("single_view",),
+QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), eval_methods=("single_view", "ar_d0.5"),
                      finetune_steps=80, insertion_train_views=2)
 FULL = StageOptions(frames=[2, 12, 22], refine_iters=300)
 

@@ -56,6 +56,15 @@ class SplatRenderer:
                                   torch.tensor(world_to_camera, dtype=torch.float32), width, height, self.degree)
         return rgb.clamp(0, 1).numpy()
 
+    @torch.no_grad()
+    def depth(self, K, world_to_camera, width: int, height: int, min_alpha: float = 0.5) -> np.ndarray:
+        """Rendered z-depth [H, W] (float64), 0 where the render is less opaque than ``min_alpha``."""
+        _, alpha, info = render_params(self.params, torch.tensor(K, dtype=torch.float32),
+                                       torch.tensor(world_to_camera, dtype=torch.float32), width, height,
+                                       self.degree, render_depth=True)
+        d = info["depth"][..., 0].double().numpy()
+        return np.where(alpha[..., 0].numpy() >= min_alpha, d, 0.0)
+
     def shifted(self, K, camera_to_world, offset_m: float, width: int, height: int) -> np.ndarray:
         """The render at the camera moved ``offset_m`` along its own +x (right)."""
         c2w = conventions.lateral_shift(camera_to_world, offset_m)

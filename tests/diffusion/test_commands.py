@@ -95,8 +95,8 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     assert metrics["refine"]["frames"] == list(range(6)) and metrics["refine"]["restored_views"] == 6 * 4
     rows = metrics["lateral"]
     assert {(r["offset_m"], r["method"]) for r in rows} == {
-        (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "refined",
-                                        "refined_recorded_only")
+        (o, m) for o in (-0.5, 0.5) for m in ("raw_3dgs", "single_view", "ar_d0.5", "ar_d1.0", "warp", "geo_single_view",
+                                        "geo_ar_d0.5", "geo_ar_d1.0", "refined", "refined_recorded_only")
     }
     assert all(r["frames"] == 3 and 0 < r["ssim"] <= 1 for r in rows)
     assert (out / "refined.ply").exists()
@@ -109,7 +109,8 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     assert metrics["refine"]["step_m"] == 0.0  # single-view restorations serve refinement as well
 
     out = tmp_path / "views"
-    assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4"]) == 0
+    assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4",
+                 "--geometry-guided"]) == 0
     index = json.loads((out / "restored.json").read_text())
     assert [(v["frame"], v["offset_m"]) for v in index["views"]] == [(0, -1.0), (0, 1.0), (4, -1.0), (4, 1.0)]
     assert all((out / v["image"]).exists() for v in index["views"])

@@ -17,6 +17,27 @@ class OffsetRenderer:
         return np.full((height, width, 3), 0.5 + offset / 10.0, np.float32)
 
 
+class OffsetWarper:
+    """A stand-in warper: the render plus 0.25, recording which frame it warps for."""
+
+    class config:
+        min_alpha = 0.5
+
+    def __init__(self):
+        self.frames = []
+
+    def warp(self, frame, K, c2w, width, height, raw, depth):
+        from types import SimpleNamespace
+
+        self.frames.append(frame)
+        return SimpleNamespace(image=raw + 0.25)
+
+
+class DepthOffsetRenderer(OffsetRenderer):
+    def depth(self, K, w2c, width, height, min_alpha):
+        return np.zeros((height, width))
+
+
 class RecordingRestorer:
     """Returns (left + right) / 2 after recording which views it was given (in pixel values)."""
 
@@ -53,6 +74,7 @@ def test_chain_positions():
     assert chain_positions(-1.5, 1.0) == pytest.approx([-0.75, -1.5])
     assert chain_positions(0.5, 1.0) == pytest.approx([0.5])
     assert method_step("ar_d0.5") == 0.5 and method_step("single_view") == 0.0
+    assert method_step("geo_ar_d1") == 1.0 and method_step("geo_single_view") == 0.0
     with pytest.raises(ValueError):
         method_step("ar_dx")
 
@@ -70,6 +92,22 @@ def test_left_chain_swaps_the_conditions():
     restorer, c = chain()
     c.restore(-0.5, 0.5)
     assert restorer.pairs[0] == (value(-1.0), 0.5)
+
+
+def test_guided_chain_takes_the_warps_for_the_renders():
+    restorer = RecordingRestorer()
+    warper = OffsetWarper()
+    recorded = np.full((4, 6, 3), 0.5, np.float32)
+    c = LateralChain(restorer, DepthOffsetRenderer(), recorded, CameraView(np.eye(4), np.eye(3), 6, 4),
+                     SamplerConfig(steps=1, n_start=0), warper, frame=7)
+    c.by_method(-0.5, "geo_ar_d0.5")
+    assert restorer.pairs[0] == (value(-1.0) + 0.25, 0.5)  # the warp at -2d is the far condition
+    c.by_method(1.0, "geo_single_view")
+    assert restorer.pairs[1] == (value(1.0) + 0.25, value(1.0) + 0.25)
+    assert np.allclose(c.by_method(3.0, "warp"), value(3.0) + 0.25) and c.samples == 2
+    assert set(warper.frames) == {7}
+    c.by_method(-0.5, "ar_d0.5")  # unguided: its own restoration, from the renders
+    assert restorer.pairs[2] == (value(-1.0), 0.5)
 
 
 def test_single_view_duplicates_the_render_at_the_target():

@@ -13,7 +13,7 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     ran = {s["name"] for s in report["stages"] if s["ran"]}
     assert {"render", "restore", "harmonize", "finetune", "evaluate"} <= ran
     methods = {(r["offset_m"], r["method"]) for r in report["metrics"]["lateral"]}
-    assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (1.0, "single_view")} <= methods
+    assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (3.0, "geo_ar_d0.5"), (1.0, "single_view")} <= methods
     assert {r["method"] for r in report["metrics"]["insertion"]} == {
         "naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow"}
     assert len(list((out / "shadows").rglob("*.png"))) == 3  # the sunny street: frames with an inserted car

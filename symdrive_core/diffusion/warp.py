@@ -1,0 +1,253 @@
+"""Geometry-guided conditions: the neighbouring recorded frames warped into a lateral camera.
+
+At a few metres sideways the reconstruction smears what the recorded drive saw sharply: the road
+ahead, lane paint included, is in the neighbouring frames, seen at an angle. Each pixel of the
+lateral camera (recorded frame ``t`` moved sideways) whose ray meets the ground below the horizon
+and within ``max_range_m`` is back-projected onto a piecewise planar ground model; that point is
+projected into every recorded frame ``s`` in ``t - radius .. t + radius`` (never ``t`` itself,
+so a training target cannot see its own image in its own warp) and its colour sampled
+bilinearly where all four source pixels show the ground there (their depth agrees with the
+ground model's: an object in front, a kerb or the sky fails). The samples are fused with weights
+falling with ``|s - t|``; pixels no frame sees take the raw render.
+
+Depth of the ground from the model, not from the reconstruction's render: rendered road depth
+wiggles, and the lane line with it. The source frames' depth is the package's recorded depth
+(``cameras[].frames[].depth``, OpenCV z-depth, 0 = sky, as LiDAR gives) where it has it, else
+the reconstruction's rendered depth with a looser tolerance. The ground model is one plane per
+window of frames along the camera path, each fitted by :func:`~..importers.ground.fit_ground`'s
+RANSAC on the package's points (``background.points``) or the splat centres; a ray takes the
+plane of the window whose anchor camera is nearest to where it meets the ground.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import conventions
+from ..errors import SymDriveError
+from ..importers.ground import AlignmentError, fit_ground
+
+
+class WarpError(SymDriveError):
+    """The package lacks what the warp needs (points to fit the ground, depth for occlusion)."""
+
+
+@dataclass(frozen=True)
+class WarpConfig:
+    radius: int = 8  # source frames t - radius .. t + radius, t excluded
+    falloff_frames: float = 4.0  # source weight exp(-|s - t| / falloff_frames)
+    max_range_m: float = 40.0  # ground pixels: z-depth at most this
+    ground_window: int = 8  # each plane is fitted to the points near cameras anchor +- this many frames
+    ground_stride: int = 4  # a plane anchored every this many frames
+    # A source pixel shows the ground where its depth is within this fraction of the ground
+    # model's (0.03: about 5 cm of height at a 1.6 m camera; a kerb or a car fails).
+    depth_tolerance: float = 0.03
+    rendered_depth_tolerance: float = 0.10  # the same with the reconstruction's depth (noisier)
+    # A lateral pixel whose rendered depth is shorter than (1 - this) x the ground's has something
+    # in front of the ground (a car, a pole): the warp leaves it to the render.
+    occluder_margin: float = 0.25
+    min_alpha: float = 0.5  # rendered depth counts where the render is this opaque
+
+
+DEFAULT = WarpConfig()
+
+
+@dataclass
+class GroundModel:
+    """Planes ``normal . x + offset = 0`` (normals up), each anchored at a camera centre."""
+
+    anchors: np.ndarray  # [K, 3] anchor camera centres
+    normals: np.ndarray  # [K, 3]
+    offsets: np.ndarray  # [K]
+
+    @classmethod
+    def fit(cls, points, c2ws, config: WarpConfig = DEFAULT) -> GroundModel:
+        """A plane per window of ``2 * ground_window + 1`` cameras, one every ``ground_stride``."""
+        c2ws = np.asarray(c2ws, dtype=np.float64)
+        n = len(c2ws)
+        anchors = list(range(0, n, max(1, config.ground_stride)))
+        if anchors[-1] != n - 1:
+            anchors.append(n - 1)
+        normals, offsets = [], []
+        for a in anchors:
+            lo, hi = max(0, a - config.ground_window), min(n, a + config.ground_window + 1)
+            try:
+                g = fit_ground(points, c2ws[lo:hi])
+            except AlignmentError as e:
+                reason = str(e).split(";")[0]
+                raise WarpError(f"the geometry-guided warp found no ground under cameras {lo} to {hi - 1}: {reason}") from e
+            normals.append(g.normal)
+            offsets.append(g.offset)
+        return cls(c2ws[anchors, :3, 3], np.array(normals), np.array(offsets))
+
+    def intersect(self, origin, dirs: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+        """Ray parameter ``lam`` (x = origin + lam * dir) where each ray meets the ground, and
+        whether it does (in front of the origin, going down). The plane is the one anchored
+        nearest to the previous hit, starting from the one nearest the origin."""
+        origin = np.asarray(origin, dtype=np.float64)
+        k = np.full(len(dirs), int(np.argmin(np.linalg.norm(self.anchors - origin, axis=1))))
+        for _ in range(iterations):
+            nrm, off = self.normals[k], self.offsets[k]
+            denom = np.einsum("ij,ij->i", dirs, nrm)
+            hits = denom < -1e-12
+            lam = np.where(hits, -(nrm @ origin + off) / np.where(hits, denom, -1.0), 0.0)
+            if len(self.anchors) == 1:
+                break
+            x = origin + lam[:, None] * dirs
+            d2 = ((x[:, None, :] - self.anchors[None]) ** 2).sum(-1)
+            k = np.where(hits, np.argmin(d2, axis=1), k)
+        return lam, hits & (lam > 0)
+
+
+def pixel_rays(K, c2w, width: int, height: int) -> np.ndarray:
+    """World directions [H*W, 3] through every pixel centre, scaled so camera z = 1 (the ray
+    parameter is then the z-depth)."""
+    u, v = np.meshgrid(np.arange(width) + conventions.PIXEL_CENTER_OFFSET,
+                       np.arange(height) + conventions.PIXEL_CENTER_OFFSET)
+    pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+    cam = pix @ np.linalg.inv(np.asarray(K, dtype=np.float64)).T
+    return cam @ np.asarray(c2w, dtype=np.float64)[:3, :3].T
+
+
+@dataclass
+class SourceFrame:
+    """A recorded frame as a warp source: its camera, image and z-depth (0 = nothing)."""
+
+    K: np.ndarray
+    camera_to_world: np.ndarray
+    image: np.ndarray  # [H, W, C]
+    depth: np.ndarray  # [H, W]
+    tolerance: float  # relative depth agreement that counts as ground
+    ground: np.ndarray | None = field(default=None, repr=False)  # [H, W] bool, filled by the warper
+
+
+@dataclass
+class Warp:
+    image: np.ndarray  # [H, W, C]: the fused warp where ``mask``, the raw render elsewhere
+    mask: np.ndarray  # [H, W] bool: at least one source frame saw the pixel's ground point
+    weight: np.ndarray  # [H, W]: the summed source weights
+
+
+class GroundWarper:
+    """Warps a package's recorded frames into shifted cameras (see the module docstring)."""
+
+    def __init__(self, ground: GroundModel, sources: dict[int, SourceFrame], config: WarpConfig = DEFAULT):
+        self.ground, self.sources, self.config = ground, sources, config
+        for src in sources.values():
+            src.ground = self._ground_mask(src)
+
+    def _ground_mask(self, src: SourceFrame) -> np.ndarray:
+        """Source pixels whose depth agrees with the ground model's."""
+        h, w = src.depth.shape
+        lam, hits = self.ground.intersect(src.camera_to_world[:3, 3], pixel_rays(src.K, src.camera_to_world, w, h))
+        d = src.depth.reshape(-1).astype(np.float64)
+        ok = hits & (d > 0) & (np.abs(d - lam) <= src.tolerance * lam)
+        return ok.reshape(h, w)
+
+    def ground_points(self, K, c2w, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """World points [H*W, 3] where each pixel's ray meets the ground, and which pixels are
+        ground (below the horizon, z-depth within ``max_range_m``)."""
+        origin = np.asarray(c2w, dtype=np.float64)[:3, 3]
+        dirs = pixel_rays(K, c2w, width, height)
+        lam, hits = self.ground.intersect(origin, dirs)
+        hits &= lam <= self.config.max_range_m
+        return origin + lam[:, None] * dirs, hits
+
+    def warp(self, frame: int, K, c2w, width: int, height: int, raw: np.ndarray,
+             rendered_depth: np.ndarray | None = None) -> Warp:
+        """The recorded frames near ``frame`` (never ``frame`` itself) warped into camera ``c2w``;
+        ``raw``: the render there, kept where no frame sees the ground; ``rendered_depth`` [H, W]
+        (with 0 where the render is empty): ground pixels with something rendered in front are
+        left to the render."""
+        cfg = self.config
+        X, ok = self.ground_points(K, c2w, width, height)
+        if rendered_depth is not None:
+            lam = (X - np.asarray(c2w, dtype=np.float64)[:3, 3]) @ np.asarray(c2w, dtype=np.float64)[:3, 2]
+            d = rendered_depth.reshape(-1).astype(np.float64)
+            ok &= (d <= 0) | (d >= (1.0 - cfg.occluder_margin) * lam)
+        idx = np.flatnonzero(ok)
+        Xg = X[idx]
+        channels = raw.shape[2]
+        acc = np.zeros((len(idx), channels))
+        wsum = np.zeros(len(idx))
+        for s in range(frame - cfg.radius, frame + cfg.radius + 1):
+            if s == frame or s not in self.sources:
+                continue
+            colour, seen = _sample(self.sources[s], Xg)
+            w = np.exp(-abs(s - frame) / cfg.falloff_frames)
+            acc[seen] += w * colour[seen]
+            wsum[seen] += w
+        weight = np.zeros(width * height)
+        weight[idx] = wsum
+        out = np.array(raw, dtype=np.float64).reshape(-1, channels)
+        seen = wsum > 0
+        out[idx[seen]] = acc[seen] / wsum[seen, None]
+        return Warp(out.reshape(height, width, channels).astype(raw.dtype), (weight > 0).reshape(height, width),
+                    weight.reshape(height, width))
+
+
+def _sample(src: SourceFrame, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear colours of world points ``X`` in ``src`` and where all four texels show the ground."""
+    h, w = src.depth.shape
+    w2c = conventions.invert_rigid(src.camera_to_world)
+    pc = X @ w2c[:3, :3].T + w2c[:3, 3]
+    z = pc[:, 2]
+    front = z > 1e-6
+    uv = pc[:, :2] / np.where(front, z, 1.0)[:, None] @ np.asarray(src.K, dtype=np.float64)[:2, :2].T \
+        + np.asarray(src.K, dtype=np.float64)[:2, 2]
+    x = uv[:, 0] - conventions.PIXEL_CENTER_OFFSET
+    y = uv[:, 1] - conventions.PIXEL_CENTER_OFFSET
+    inside = front & (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+    x = np.where(inside, x, 0.0)
+    y = np.where(inside, y, 0.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), max(w - 2, 0))
+    y0 = np.minimum(np.floor(y).astype(np.int64), max(h - 2, 0))
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    g = src.ground
+    seen = inside & g[y0, x0] & g[y0, x1] & g[y1, x0] & g[y1, x1]
+    img = src.image
+    colour = ((1 - fy) * ((1 - fx) * img[y0, x0] + fx * img[y0, x1])
+              + fy * ((1 - fx) * img[y1, x0] + fx * img[y1, x1]))
+    return colour, seen
+
+
+def package_warper(manifest, cam, gaussians=None, config: WarpConfig = DEFAULT) -> GroundWarper:
+    """The warper for camera ``cam`` of a package: the ground fitted to ``background.points``
+    (else the splat centres of ``gaussians``), every recorded frame a source, with the package's
+    depth where it has it, else the depth ``gaussians`` render."""
+    from ..io.images import read_image
+    from ..io.points import read_points
+
+    where = manifest.path or manifest.root
+    if manifest.background_points:
+        points = read_points(manifest.resolve(manifest.background_points, "background.points"))[0]
+    elif gaussians is not None:
+        points = gaussians.means
+    else:
+        raise WarpError(f"{where}: the geometry-guided warp fits the ground to background.points or the "
+                        "background splats; the package has neither")
+    ground = GroundModel.fit(points, [cf.camera_to_world for cf in cam.frames], config)
+    renderer = None
+    sources = {}
+    for fi, cf in enumerate(cam.frames):
+        if not cf.image:
+            continue
+        image = read_image(manifest.resolve(cf.image), channels=3)
+        if cf.depth:
+            depth, tol = read_image(manifest.resolve(cf.depth), channels=1)[..., 0], config.depth_tolerance
+        elif gaussians is not None:
+            from ..splat.render import SplatRenderer
+
+            renderer = renderer or SplatRenderer(gaussians)
+            depth = renderer.depth(cf.K, cf.world_to_camera, cam.width, cam.height, config.min_alpha)
+            tol = config.rendered_depth_tolerance
+        else:
+            raise WarpError(f"{where}: cameras.{cam.name}.frames[{fi}] has no depth and there are no background "
+                            "splats to render it from: the geometry-guided warp needs one of them for occlusion")
+        sources[fi] = SourceFrame(cf.K, cf.camera_to_world, image, depth, tol)
+    if not sources:
+        raise WarpError(f"{where}: camera {cam.name!r} has no recorded images to warp")
+    return GroundWarper(ground, sources, config)

@@ -1,0 +1,156 @@
+"""The geometry-guided warp on a synthetic textured ground seen by cameras along a path."""
+
+import numpy as np
+import pytest
+
+from symdrive_core import conventions
+from symdrive_core.diffusion.warp import (
+    GroundModel,
+    GroundWarper,
+    SourceFrame,
+    WarpConfig,
+    WarpError,
+    package_warper,
+    pixel_rays,
+)
+
+HEIGHT_M = 10.0
+W = H = 64
+K = conventions.intrinsics(32.0, 32.0, W / 2, H / 2)
+FLAT = GroundModel(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros(1))
+
+
+def texture(X: np.ndarray) -> np.ndarray:
+    """Affine in the ground's (x, y): bilinear sampling of its straight-down images is exact."""
+    x, y = X[:, 0], X[:, 1]
+    return np.stack([0.1 + 0.01 * x + 0.02 * y, 0.5 - 0.01 * y, 0.3 + 0.005 * x + 0.003 * y], axis=1)
+
+
+def down_camera(x: float) -> np.ndarray:
+    """OpenCV camera over (x, 0) looking straight down, image right = -y, image up = +x."""
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T
+    c2w[:3, 3] = [x, 0.0, HEIGHT_M]
+    return c2w
+
+
+def render_ground(c2w, ground=FLAT) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The textured plane's image, its z-depth (0 where no ground) and its world points."""
+    dirs = pixel_rays(K, c2w, W, H)
+    lam, hits = ground.intersect(c2w[:3, 3], dirs)
+    X = c2w[:3, 3] + lam[:, None] * dirs
+    img = np.where(hits[:, None], texture(X), 0.0)
+    return img.reshape(H, W, 3), np.where(hits, lam, 0.0).reshape(H, W), X
+
+
+def path_warper(n=9, config=WarpConfig(), depth_edit=None) -> GroundWarper:
+    sources = {}
+    for i in range(n):
+        c2w = down_camera(float(i))
+        img, depth, X = render_ground(c2w)
+        if depth_edit is not None:
+            depth = depth_edit(depth, X)
+        sources[i] = SourceFrame(K, c2w, img, depth, config.depth_tolerance)
+    return GroundWarper(FLAT, sources, config)
+
+
+def test_warp_reproduces_the_shifted_ground():
+    warper = path_warper()
+    c2w = conventions.lateral_shift(down_camera(4.0), 3.0)
+    truth, _, _ = render_ground(c2w)
+    w = warper.warp(4, K, c2w, W, H, np.zeros((H, W, 3)))
+    assert w.mask.mean() > 0.7
+    assert np.abs(w.image[w.mask] - truth[w.mask]).max() < 1e-9
+    assert np.all(w.image[~w.mask] == 0)  # the raw render where no frame sees the ground
+
+
+def test_a_frame_never_contributes_to_its_own_warp():
+    warper = path_warper()
+    warper.sources[4].image = np.full((H, W, 3), np.nan)
+    c2w = conventions.lateral_shift(down_camera(4.0), 1.0)
+    assert np.isfinite(warper.warp(4, K, c2w, W, H, np.zeros((H, W, 3))).image).all()
+    alone = GroundWarper(FLAT, {4: path_warper().sources[4]}, WarpConfig())
+    assert not alone.warp(4, K, c2w, W, H, np.zeros((H, W, 3))).mask.any()
+
+
+def test_ground_hidden_in_every_recorded_depth_is_invalid():
+    """A box standing on the ground around (4, -2): the recorded depth shows its top in front."""
+    centre, half = np.array([4.0, -2.0]), 1.5
+
+    def with_box(depth, X):
+        inside = (np.abs(X[:, :2] - centre) < half).all(1).reshape(depth.shape)
+        return np.where(inside, HEIGHT_M - 2.0, depth)
+
+    warper = path_warper(depth_edit=with_box)
+    c2w = conventions.lateral_shift(down_camera(4.0), 3.0)
+    truth, _, X = render_ground(c2w)
+    w = warper.warp(4, K, c2w, W, H, np.zeros((H, W, 3)))
+    d = np.abs(X[:, :2] - centre).max(1).reshape(H, W)
+    assert not w.mask[d < half].any()
+    seen_without_box = path_warper().warp(4, K, c2w, W, H, np.zeros((H, W, 3))).mask
+    away = d > half + 1.0  # beyond the box by more than a source pixel's footprint
+    assert w.mask[away & seen_without_box].all()
+    assert np.abs(w.image[w.mask] - truth[w.mask]).max() < 1e-9
+
+
+def forward_camera(x: float, height: float = 1.6) -> np.ndarray:
+    """OpenCV camera at (x, 0, height) looking along +x, level."""
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]).T
+    c2w[:3, 3] = [x, 0.0, height]
+    return c2w
+
+
+def test_pixels_above_the_horizon_or_beyond_range_are_invalid():
+    cfg = WarpConfig(max_range_m=30.0)
+    sources = {}
+    for i in range(9):
+        c2w = forward_camera(float(i))
+        img, depth, _ = render_ground(c2w)
+        sources[i] = SourceFrame(K, c2w, img, depth, cfg.depth_tolerance)
+    warper = GroundWarper(FLAT, sources, cfg)
+    c2w = conventions.lateral_shift(forward_camera(4.0), 2.0)
+    w = warper.warp(4, K, c2w, W, H, np.zeros((H, W, 3)))
+    assert not w.mask[: H // 2].any()  # level camera: the upper half looks at the sky
+    X, ok = warper.ground_points(K, c2w, W, H)
+    z = (X - c2w[:3, 3]) @ c2w[:3, 2]
+    assert not ok[z > 30.0].any() and ok.reshape(H, W)[H // 2 + 4:].all()
+    assert w.mask[H // 2 + 8:].mean() > 0.5
+
+
+def test_ground_fit_recovers_a_tilted_plane():
+    """Points on a 6 degree slope with 1 cm noise, clutter above it; cameras 1.6 m above it."""
+    rng = np.random.default_rng(0)
+    normal = np.array([-0.1, 0.02, 1.0]) / np.linalg.norm([-0.1, 0.02, 1.0])
+    xy = rng.uniform([-5, -8], [25, 8], size=(20000, 2))
+    z = (0.1 * xy[:, 0] - 0.02 * xy[:, 1]) + rng.normal(0, 0.01, len(xy))
+    clutter = np.column_stack([rng.uniform(-5, 25, 4000), rng.uniform(-8, 8, 4000), rng.uniform(0.3, 6, 4000)])
+    clutter[:, 2] += 0.1 * clutter[:, 0] - 0.02 * clutter[:, 1]
+    points = np.vstack([np.column_stack([xy, z]), clutter])
+    c2ws = []
+    for i in range(20):
+        c2w = forward_camera(float(i))
+        c2w[2, 3] = 0.1 * i + 1.6 / normal[2]
+        c2ws.append(c2w)
+    model = GroundModel.fit(points, c2ws, WarpConfig(ground_window=4, ground_stride=5))
+    assert len(model.normals) == 5  # anchors 0, 5, 10, 15 and the last camera
+    assert np.all(model.normals @ normal > np.cos(np.deg2rad(0.5)))
+    assert np.allclose(model.offsets, 0.0, atol=0.02)
+
+
+def test_a_package_without_depth_or_background_is_refused(tmp_path):
+    from symdrive_core.io.images import write_image
+    from symdrive_core.io.points import write_points
+    from symdrive_core.scene.manifest import Camera, CameraFrame, Frame, Manifest
+
+    write_image(tmp_path / "0.png", np.zeros((H, W, 3), np.float32))
+    c2w = forward_camera(0.0)
+    cam = Camera("front", W, H, [CameraFrame(K, c2w, conventions.invert_rigid(c2w), "0.png")])
+    m = Manifest("t", [Frame(0, 0.0)], [cam], [], root=tmp_path)
+    with pytest.raises(WarpError, match="background.points or the background splats"):
+        package_warper(m, cam)
+    grid = np.stack(np.meshgrid(np.arange(10.0), np.arange(-3.0, 4.0), [0.0]), -1).reshape(-1, 3)
+    write_points(tmp_path / "points.ply", grid, np.zeros_like(grid))
+    m.background_points = "points.ply"
+    with pytest.raises(WarpError, match="no depth"):
+        package_warper(m, cam)
