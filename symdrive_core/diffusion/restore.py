@@ -24,12 +24,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import conventions
 from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
 from ..scene import Manifest
-from ..scene.camera import CameraView
+from ..scene.camera import CameraView, SeenBy
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
 
@@ -157,24 +156,18 @@ class LateralChain:
 
 
 @dataclass
-class RestoredView:
+class RestoredView(SeenBy):
     """A restored image and the camera it belongs to (what 3DGS refinement trains on)."""
 
     frame: int
     offset_m: float
-    K: np.ndarray
-    camera_to_world: np.ndarray
-    world_to_camera: np.ndarray
-    width: int
-    height: int
+    camera: CameraView
     image: np.ndarray
 
     @classmethod
     def shifted(cls, cam, frame: int, offset_m: float, image: np.ndarray) -> RestoredView:
         """``image`` as the view of ``cam``'s recorded frame ``frame`` moved ``offset_m`` to the right."""
-        cf = cam.frames[frame]
-        c2w = conventions.lateral_shift(cf.camera_to_world, offset_m)
-        return cls(frame, offset_m, cf.K, c2w, conventions.invert_rigid(c2w), cam.width, cam.height, image)
+        return cls(frame, offset_m, CameraView.of_frame(cam, frame).shifted(offset_m), image)
 
 
 @dataclass
@@ -278,9 +271,7 @@ def run_lateral_restoration(
 
                 scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))
                 result.views.setdefault(method, []).append(
-                    RestoredView(
-                        fi, v.offset_m, v.K, v.camera_to_world, v.world_to_camera, v.width, v.height, img
-                    )
+                    RestoredView(fi, v.offset_m, v.camera, img)
                 )
                 bar.update()
     bar.close()

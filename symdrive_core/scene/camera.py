@@ -40,3 +40,31 @@ class CameraView:
         K[0, 2] -= cols.start
         K[1, 2] -= rows.start
         return CameraView(self.world_to_camera, K, cols.stop - cols.start, rows.stop - rows.start)
+
+
+class SeenBy:
+    """For records of an image and the camera it was taken with (``camera: CameraView``): the
+    camera's fields read through, so such a record is passed wherever a view's K, pose and size
+    are read."""
+
+    camera: CameraView
+
+    @property
+    def K(self) -> np.ndarray:
+        return self.camera.K
+
+    @property
+    def world_to_camera(self) -> np.ndarray:
+        return self.camera.world_to_camera
+
+    @property
+    def camera_to_world(self) -> np.ndarray:
+        return self.camera.camera_to_world
+
+    @property
+    def width(self) -> int:
+        return self.camera.width
+
+    @property
+    def height(self) -> int:
+        return self.camera.height

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from .. import conventions
+from .camera import CameraView, SeenBy
 from .manifest import Manifest
 
 
@@ -46,15 +44,11 @@ def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int],
 
 
 @dataclass
-class LateralView:
+class LateralView(SeenBy):
     offset_m: float
     frame: int
-    K: np.ndarray
-    camera_to_world: np.ndarray
-    world_to_camera: np.ndarray
+    camera: CameraView  # the recorded frame's camera moved offset_m to its right
     image: str  # ground truth, relative to the package
-    width: int
-    height: int
     lanes: str | None = None  # its exact lane-marking mask, relative to the package
 
     def lane_truth(self, manifest: Manifest):
@@ -91,10 +85,8 @@ def lateral_views(manifest: Manifest) -> list[LateralView]:
         cam = manifest.camera(entry.get("camera", manifest.cameras[0].name))
         off = float(entry["offset_m"])
         for key, rel in sorted(entry["frames"].items(), key=lambda kv: int(kv[0])):
-            cf = cam.frames[int(key)]
-            c2w = conventions.lateral_shift(cf.camera_to_world, off)
-            out.append(LateralView(off, int(key), cf.K, c2w, conventions.invert_rigid(c2w), rel,
-                                   cam.width, cam.height, masks.get((cam.name, off, int(key)))))
+            out.append(LateralView(off, int(key), CameraView.of_frame(cam, int(key)).shifted(off), rel,
+                                   masks.get((cam.name, off, int(key)))))
     return out
 
 

@@ -24,11 +24,7 @@ def test_refining_on_good_lateral_views_improves_the_lateral_score(synthetic_pac
         RestoredView(
             v.frame,
             v.offset_m,
-            v.K,
-            v.camera_to_world,
-            v.world_to_camera,
-            v.width,
-            v.height,
+            v.camera,
             render_truth(truth, v.camera_to_world, v.K)[0],
         )
         for v in lateral_views(manifest)
