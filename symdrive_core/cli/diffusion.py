@@ -335,10 +335,10 @@ def _restore(args) -> int:
 
 def _check_frames(manifest, args) -> None:
     """--frames / --refine-frames must name frames of the camera that is shifted sideways."""
-    from ..diffusion.restore import lateral_camera
     from ..errors import InputError
+    from ..scene.ground_truth import truth_camera
 
-    cam = lateral_camera(manifest)
+    cam = truth_camera(manifest)
     for option, frames in (("--frames", args.frames), ("--refine-frames", args.refine_frames)):
         bad = [f for f in frames or () if not 0 <= f < len(cam.frames)]
         if bad:
@@ -347,10 +347,11 @@ def _check_frames(manifest, args) -> None:
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
-    from ..diffusion.restore import lateral_camera, restore_lateral_views
+    from ..diffusion.restore import restore_lateral_views
     from ..io.images import write_image
+    from ..scene.ground_truth import truth_camera
 
-    cam = lateral_camera(manifest)
+    cam = truth_camera(manifest)
     views = restore_lateral_views(manifest, gaussians, restorer, args.frames, args.offsets, args.step,
                                   sampler=sampler, progress=not args.quiet, guided=args.geometry_guided)
     index = []

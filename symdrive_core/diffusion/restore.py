@@ -29,6 +29,7 @@ from ..io.images import read_image
 from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
 from ..scene import Manifest
 from ..scene.camera import CameraView, SeenBy
+from ..scene.ground_truth import truth_camera
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
 
@@ -177,11 +178,6 @@ class LateralRestoration:
     chains: dict[int, LateralChain] = field(default_factory=dict)  # by frame, their restorations cached
 
 
-def lateral_camera(manifest: Manifest):
-    """The camera whose views are shifted sideways: the ground truth's, else the first."""
-    return manifest.camera((manifest.ground_truth or {}).get("camera", manifest.cameras[0].name))
-
-
 def restore_lateral_views(
     manifest: Manifest,
     gaussians: Gaussians,
@@ -201,7 +197,7 @@ def restore_lateral_views(
     trains on these."""
     from tqdm import tqdm
 
-    cam = lateral_camera(manifest)
+    cam = truth_camera(manifest)
     frames = range(len(cam.frames)) if frames is None else frames
     render = SplatRenderer(gaussians)
     chains = {} if chains is None else chains
@@ -245,7 +241,7 @@ def run_lateral_restoration(
         if m != WARP:
             method_step(m)  # an unknown name fails before any work
     render = SplatRenderer(gaussians)
-    cam = lateral_camera(manifest)
+    cam = truth_camera(manifest)
     if warper is None and needs_warp(methods):
         warper = _warper(manifest, cam, gaussians)
     scores: dict[tuple[float, str], list] = {}

@@ -15,6 +15,7 @@ import numpy as np
 from .. import conventions
 from ..scene import Manifest, Pose
 from ..scene.camera import CameraView
+from ..scene.ground_truth import truth_camera
 
 
 @dataclass
@@ -34,7 +35,7 @@ class HeldOut:
 def held_out_placements(manifest: Manifest) -> list[HeldOut]:
     out = []
     for k, e in enumerate((manifest.ground_truth or {}).get("insertion", [])):
-        cam = manifest.camera(e.get("camera", manifest.cameras[0].name))
+        cam = manifest.camera(e["camera"]) if "camera" in e else truth_camera(manifest)
         pose = Pose(np.asarray(e["pose"]["translation"], dtype=np.float64),
                     np.asarray(e["pose"]["rotation"], dtype=np.float64))
         out.append(HeldOut(k, e["asset"], pose, np.asarray(e["wlh"], dtype=np.float64), int(e["frame"]), cam.name,

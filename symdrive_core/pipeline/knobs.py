@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from ..diffusion.harmonize import CROP_MARGIN
+from ..scene.ground_truth import with_placements
 from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
 from .stages import StageOptions
@@ -157,7 +158,6 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
 
 def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Colour/opacity fine-tune iterations, scored as masked PSNR of held-out placements."""
-    from dataclasses import replace
 
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
@@ -173,8 +173,7 @@ def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
             cache[key] = harmonize(image, region)
         return cache[key]
 
-    placements = (manifest.ground_truth or {}).get("insertion", [])[: budget.placements]
-    scoped = replace(manifest, ground_truth={**manifest.ground_truth, "insertion": placements})
+    scoped = with_placements(manifest, budget.placements)
 
     def measure(steps: int):
         def run() -> dict:
@@ -196,14 +195,12 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
     """RePaint sampler steps (same start fraction), samples averaged and the context around the
     region the sampler sees, scored as masked PSNR of the harmonized frame against the car truly in
     the scene; seconds per harmonized frame."""
-    from dataclasses import replace
 
     from ..insertion.evaluate import InsertionConfig, evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
     from ..optim.finetune import FinetuneConfig
 
-    placements = (manifest.ground_truth or {}).get("insertion", [])[: budget.placements]
-    scoped = replace(manifest, ground_truth={**manifest.ground_truth, "insertion": placements})
+    scoped = with_placements(manifest, budget.placements)
 
     def measure(steps: int, samples: int, margin: int | None = CROP_MARGIN):
         def run() -> dict:

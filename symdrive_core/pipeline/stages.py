@@ -18,6 +18,7 @@ from ..diffusion.defaults import SAMPLER_DEFAULTS
 from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
 from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
 from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS
+from ..scene.ground_truth import has_insertion_truth, has_lateral_truth
 
 
 @dataclass
@@ -120,10 +121,6 @@ def _sampler(opts: StageOptions):
                          max_memory_gib=opts.max_memory_gib)
 
 
-def _has_lateral_truth(manifest) -> bool:
-    return bool((manifest.ground_truth or {}).get("lateral"))
-
-
 @stage("reconstruct")
 def reconstruct_stage(ctx) -> StageResult:
     """Fit background Gaussians to the package's images (it had none); later stages read them
@@ -156,13 +153,12 @@ def restore_stage(ctx) -> StageResult:
     from ..diffusion.restore import (
         LateralChain,
         RestoredView,
-        lateral_camera,
         run_lateral_restoration,
     )
     from ..diffusion.warp import WarpError, package_warper
     from ..io.images import read_image, write_image
     from ..optim.evaluate import evaluate_lateral
-    from ..scene.ground_truth import with_lateral_offsets
+    from ..scene.ground_truth import truth_camera, with_lateral_offsets
     from ..splat.render import SplatRenderer
 
     m, opts = ctx.manifest, ctx.options
@@ -180,19 +176,19 @@ def restore_stage(ctx) -> StageResult:
                 details.setdefault("geometry_guided_off", {})[cam.name] = str(e)
         return warpers.get(cam.name)
 
-    default = ("geo_" if warper(lateral_camera(m)) else "") + plain
+    default = ("geo_" if warper(truth_camera(m)) else "") + plain
     offsets = m.effects.lateral_offsets if opts.offsets is None else list(opts.offsets)
     done: set[tuple[str, int, float]] = set()
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
     metrics = {}
-    if ctx.plan.runs("evaluate") and _has_lateral_truth(m):
+    if ctx.plan.runs("evaluate") and has_lateral_truth(m):
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
-                                      progress=ctx.progress, warper=warpers.get(lateral_camera(m).name))
+                                      progress=ctx.progress, warper=warpers.get(truth_camera(m).name))
         metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", opts.frames) + res.rows
         ctx.shared.restored = list(res.views[default])
-        cam_name = lateral_camera(m).name
+        cam_name = truth_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
         for v in ctx.shared.restored:
             write_image(ctx.tree.frame("restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
@@ -225,7 +221,7 @@ def refine_stage(ctx) -> StageResult:
                                       progress=ctx.progress)
     write_splats(ctx.tree.path("refine", "background.ply"), refined)
     metrics = {}
-    if ctx.plan.runs("evaluate") and _has_lateral_truth(ctx.manifest):
+    if ctx.plan.runs("evaluate") and has_lateral_truth(ctx.manifest):
         metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.options.frames)
                               if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets]
     details = {k: v for k, v in stats.items() if isinstance(v, (int, float))}
@@ -334,7 +330,7 @@ def evaluate_stage(ctx) -> StageResult:
     has_background = background_path(ctx) is not None
     if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
         metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
-    if (m.ground_truth or {}).get("insertion") and has_background:
+    if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = InsertionConfig(train_views=opts.insertion_train_views,
                               finetune=FinetuneConfig(steps=opts.finetune_steps, seed=opts.seed),

@@ -98,3 +98,25 @@ def with_lateral_offsets(manifest: Manifest, offsets) -> Manifest:
     gt = manifest.ground_truth or {}
     lateral = [e for e in gt.get("lateral", []) if round(float(e["offset_m"]), 6) in keep]
     return replace(manifest, ground_truth={**gt, "lateral": lateral})
+
+
+def truth_camera(manifest: Manifest):
+    """The package camera the ground truth is about (``ground_truth.camera``, else the first)."""
+    name = (manifest.ground_truth or {}).get("camera")
+    return manifest.camera(name) if name is not None else manifest.cameras[0]
+
+
+def has_lateral_truth(manifest: Manifest) -> bool:
+    return bool((manifest.ground_truth or {}).get("lateral"))
+
+
+def has_insertion_truth(manifest: Manifest) -> bool:
+    return bool((manifest.ground_truth or {}).get("insertion"))
+
+
+def with_placements(manifest: Manifest, count: int) -> Manifest:
+    """A view of ``manifest`` whose held-out insertion placements keep only the first ``count``."""
+    from dataclasses import replace
+
+    gt = manifest.ground_truth or {}
+    return replace(manifest, ground_truth={**gt, "insertion": gt.get("insertion", [])[:count]})

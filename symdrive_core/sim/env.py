@@ -40,6 +40,7 @@ from gymnasium import spaces
 
 from .. import conventions
 from ..scene import Manifest, load_manifest
+from ..scene.ground_truth import truth_camera
 from . import episode as ep
 from .bicycle import EgoState, step, waypoint_control
 from .config import SimConfig
@@ -73,8 +74,7 @@ class SymDriveEnv(gym.Env):
                                 else max(cfg.time_limit_factor * duration, 10 * self.dt))
         names = cfg.cameras or [c.name for c in m.cameras]
         self.cameras = [m.camera(n) for n in names]
-        ref_name = m.ground_truth.get("camera") if isinstance(m.ground_truth.get("camera"), str) else None
-        ref = m.camera(ref_name) if ref_name in [c.name for c in m.cameras] else m.cameras[0]
+        ref = truth_camera(m)
         self.wlh = np.asarray(cfg.ego_wlh, dtype=np.float64)
 
         # The recorded ego path, from the reference camera.
