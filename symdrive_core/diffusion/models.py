@@ -36,8 +36,17 @@ class BuiltinRestorer:
     def time_shift(self, latent_shape) -> float:
         return 0.0
 
-    def velocity(self, z_t, t, cond_left, cond_right) -> torch.Tensor:
-        return self.net(z_t, t, cond_left, cond_right)
+    @property
+    def guide_channels(self) -> int:
+        """Channels of the geometry-guided condition it takes (0: none)."""
+        return self.net.config.guide_channels
+
+    def encode_guide(self, guide: torch.Tensor) -> torch.Tensor:
+        """Warp and mask [B, 4, H, W] in [0, 1] -> the network's [-1, 1] input."""
+        return guide * 2.0 - 1.0
+
+    def velocity(self, z_t, t, cond_left, cond_right, guide=None) -> torch.Tensor:
+        return self.net(z_t, t, cond_left, cond_right, guide)
 
     def parameters(self):
         return self.net.parameters()
