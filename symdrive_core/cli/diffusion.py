@@ -115,9 +115,6 @@ def add_commands(sub) -> None:
     p.add_argument("--guide", action="store_true",
                    help="the geometry-guided warp and its mask as a condition (pairs from make-pairs --warps); "
                    "unguided --init weights are extended with zero-initialised inputs")
-    p.add_argument("--guide", action="store_true",
-                   help="the geometry-guided warp and its mask as a condition (pairs from make-pairs --warps); "
-                   "unguided --init weights are extended with zero-initialised inputs")
     p.add_argument("--resume", action="store_true",
                    help="continue from OUT/checkpoint.safetensors (flux: OUT/flux_checkpoint.safetensors)")
     # Flux.1-dev + LoRA (the paper's recipe; GPU): diffusion.flux_train, defaults in FluxTrainConfig
