@@ -24,13 +24,18 @@ from .latent import PixelSpace
 from .unet import UNet, UNetConfig
 
 DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "restorer.safetensors"
+# trained with the geometry-guided warp and its mask as conditions (scripts/train_restorer_geo.sh);
+# where it ships, the geometry-guided methods sample with it and everything else with the default
+GUIDED_WEIGHTS = DEFAULT_WEIGHTS.with_name("restorer_geo.safetensors")
 
 
 class BuiltinRestorer:
-    """The shipped UNet in pixel space (no time shift)."""
+    """The shipped UNet in pixel space (no time shift). ``guided``: the restorer the
+    geometry-guided methods sample with instead of this one (None: this one)."""
 
-    def __init__(self, net: UNet):
+    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None):
         self.net = net
+        self.guided = guided
         self.latent = PixelSpace()
 
     def time_shift(self, latent_shape) -> float:
@@ -89,9 +94,15 @@ def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
 
 
 def load_restorer(backend: str = "builtin", weights: str | os.PathLike | None = None, **flux_files):
-    """``builtin`` (``weights`` or the shipped file) or ``flux`` (see :func:`.flux.load_flux`)."""
+    """``builtin`` (``weights``, else the shipped file with the shipped guided restorer, where there
+    is one, for the geometry-guided methods) or ``flux`` (see :func:`.flux.load_flux`)."""
     if backend == "builtin":
-        return load_builtin(weights or DEFAULT_WEIGHTS)
+        if weights:
+            return load_builtin(weights)
+        restorer = load_builtin(DEFAULT_WEIGHTS)
+        if GUIDED_WEIGHTS.exists():
+            restorer.guided = load_builtin(GUIDED_WEIGHTS)
+        return restorer
     if backend == "flux":
         from .flux import load_flux
 

@@ -15,7 +15,8 @@ uses (the start state and the far condition) by the recorded neighbours warped i
 over the ground (:mod:`.warp`), the render kept where no frame sees the ground; ``warp`` is that
 image alone, with no restorer. A restorer trained with the warp as a condition (``guide_channels``)
 also gets the warp at the target camera and its validity mask; in the unguided methods its guide
-is the render with an empty mask (no frame seen).
+is the render with an empty mask (no frame seen). A restorer with a ``guided`` sibling (the shipped
+guided weights) hands the geometry-guided samples to it.
 """
 
 from __future__ import annotations
@@ -134,9 +135,12 @@ class LateralChain:
             return self.recorded if offset == 0 else self.warp(offset)
         return self.restore(offset, method_step(method), guided=method.startswith(GEO))
 
+    def _restorer(self, guided: bool):
+        return (getattr(self.restorer, "guided", None) or self.restorer) if guided else self.restorer
+
     def _guide(self, offset: float, guided: bool) -> torch.Tensor | None:
         """Warp and mask at ``offset`` [1, 4, H, W] for a restorer that takes them, else None."""
-        if not getattr(self.restorer, "guide_channels", 0):
+        if not getattr(self._restorer(guided), "guide_channels", 0):
             return None
         if guided:
             w = self._warp(offset)
@@ -146,10 +150,10 @@ class LateralChain:
             mask = np.zeros(image.shape[:2], dtype=bool)
         return torch.cat([to_tensor(image), torch.from_numpy(mask).float()[None, None]], dim=1)
 
-    def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray, guide: torch.Tensor | None) -> np.ndarray:
+    def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray, offset: float, guided: bool) -> np.ndarray:
         self.samples += 1
-        return to_numpy(restore_image(self.restorer, to_tensor(left), to_tensor(right), to_tensor(init), self.sampler,
-                                      guide))
+        return to_numpy(restore_image(self._restorer(guided), to_tensor(left), to_tensor(right), to_tensor(init),
+                                      self.sampler, self._guide(offset, guided)))
 
     def restore(self, offset: float, step: float, guided: bool = False) -> np.ndarray:
         """The restored view at ``offset`` metres (positive = right) with chain step ``step``;
@@ -160,7 +164,7 @@ class LateralChain:
             key = (guided, 0.0, round(offset, 6))
             if key not in self._restored:
                 r = self._start(offset, guided)
-                self._restored[key] = self._sample(r, r, r, self._guide(offset, guided))
+                self._restored[key] = self._sample(r, r, r, offset, guided)
             return self._restored[key]
         prev, prev_pos = self.recorded, 0.0
         for pos in chain_positions(offset, step):
@@ -168,7 +172,7 @@ class LateralChain:
             if key not in self._restored:
                 far = self._start(2 * pos - prev_pos, guided)
                 left, right = (prev, far) if pos > 0 else (far, prev)
-                self._restored[key] = self._sample(left, right, self._start(pos, guided), self._guide(pos, guided))
+                self._restored[key] = self._sample(left, right, self._start(pos, guided), pos, guided)
             prev, prev_pos = self._restored[key], pos
         return prev
 

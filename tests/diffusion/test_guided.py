@@ -112,6 +112,20 @@ def test_guided_training_extends_unguided_init_weights(tmp_path):
     assert load_builtin(tmp_path / "geo" / "restorer.safetensors").guide_channels == 4
 
 
+class SeenWarper:
+    """A stand-in warper: the render plus 0.25, seen by some frame in the first ``columns`` columns."""
+
+    config = SimpleNamespace(min_alpha=0.5)
+
+    def __init__(self, columns: int):
+        self.columns = columns
+
+    def warp(self, frame, K, c2w, width, height, raw, depth):
+        mask = np.zeros((height, width), bool)
+        mask[:, : self.columns] = True
+        return SimpleNamespace(image=raw + 0.25, mask=mask)
+
+
 def test_chain_gives_a_guided_restorer_the_warp_and_its_mask():
     seen = []
 
@@ -120,17 +134,9 @@ def test_chain_gives_a_guided_restorer_the_warp_and_its_mask():
             seen.append(guide)
             return super().velocity(z, t, left, right, guide)
 
-    class MaskedWarper:
-        config = SimpleNamespace(min_alpha=0.5)
-
-        def warp(self, frame, K, c2w, width, height, raw, depth):
-            mask = np.zeros((height, width), bool)
-            mask[:, :2] = True
-            return SimpleNamespace(image=raw + 0.25, mask=mask)
-
     restorer = Guided(with_guide(UNet(SMALL)))
     c = LateralChain(restorer, DepthOffsetRenderer(), np.full((4, 6, 3), 0.5, np.float32),
-                     CameraView(np.eye(4), np.eye(3), 6, 4), SamplerConfig(steps=1, n_start=0), MaskedWarper(), 0)
+                     CameraView(np.eye(4), np.eye(3), 6, 4), SamplerConfig(steps=1, n_start=0), SeenWarper(2), 0)
     c.by_method(0.5, "geo_single_view")
     raw = OffsetRenderer()(None, conventions.invert_rigid(conventions.lateral_shift(np.eye(4), 0.5)), 6, 4)
     expect_warp = torch.from_numpy(raw + 0.25).permute(2, 0, 1) * 2 - 1
@@ -138,3 +144,24 @@ def test_chain_gives_a_guided_restorer_the_warp_and_its_mask():
     assert seen[0][0, 3, :, :2].eq(1).all() and seen[0][0, 3, :, 2:].eq(-1).all()
     c.by_method(0.5, "single_view")  # unguided: the render, nothing seen
     assert seen[1][0, 3].eq(-1).all()
+
+
+def test_shipped_guided_weights_serve_the_guided_methods_only(tmp_path, monkeypatch):
+    from symdrive_core.diffusion import models
+
+    save_builtin(tmp_path / "geo.safetensors", with_guide(trained_like()))
+    monkeypatch.setattr(models, "GUIDED_WEIGHTS", tmp_path / "absent.safetensors")
+    assert models.load_restorer().guided is None  # no guided weights shipped: one restorer for all
+    monkeypatch.setattr(models, "GUIDED_WEIGHTS", tmp_path / "geo.safetensors")
+    base = models.load_restorer()
+    assert base.guide_channels == 0 and base.guided.guide_channels == 4
+    assert models.load_restorer(weights=tmp_path / "geo.safetensors").guided is None  # explicit weights: those
+    used = []
+    for r in (base, base.guided):
+        r.velocity = lambda z, t, left, right, guide=None, r=r: used.append((r, guide)) or torch.zeros_like(z)
+    c = LateralChain(base, DepthOffsetRenderer(), np.full((4, 6, 3), 0.5, np.float32),
+                     CameraView(np.eye(4), np.eye(3), 6, 4), SamplerConfig(steps=1, n_start=0), SeenWarper(6), 0)
+    c.by_method(0.5, "single_view")
+    c.by_method(0.5, "geo_single_view")
+    assert [(r is base.guided, g is not None) for r, g in used] == [(False, False), (True, True)]
+
