@@ -16,11 +16,11 @@ Pairs are stored as one safetensors file of uint8 images ([N, H, W, 3] ``left``,
 training data. With ``warps`` each recorded frame also gets its geometry-guided warp
 (:mod:`.warp`) at the recorded camera, ``warp`` [F, H, W, 3] with ``warp_mask`` [F, H, W] and
 ``warp_frame``, made from the other pair frames only: the target never contributes its own image
-(or the network would learn to copy it), and the frames it is not trained on stay unseen. Batches
-then also carry that warp as a condition, filled where no frame saw the ground by a degraded
-start, as sampling fills it with the render. Batches are random crops (the UNet is fully convolutional) with a mirror
-augmentation that flips the images and swaps left and right, which is the same street seen in a
-mirror.
+(or the network would learn to copy it), and frames outside the pairs (held out) are no source.
+Batches then also carry that warp as a condition, filled where no frame saw the ground by a
+degraded start, as sampling fills it with the render. Batches are random crops (the UNet is fully
+convolutional) with a mirror augmentation that flips the images and swaps left and right, which
+is the same street seen in a mirror.
 """
 
 from __future__ import annotations
