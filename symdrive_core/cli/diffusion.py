@@ -76,6 +76,9 @@ def add_commands(sub) -> None:
         default=CYCLE_DEFAULTS[1],
         help="densification cap of each cycle reconstruction",
     )
+    p.add_argument("--warps", action="store_true",
+                   help="also each frame's geometry-guided warp from the other frames (needs --cycle), "
+                   "for training with --guide")
     p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
     add_quiet_option(p)
     add_external_assets_option(p)
@@ -109,6 +112,9 @@ def add_commands(sub) -> None:
         ("--init", str, "restorer weights to continue from (default: a fresh network)"),
     ):
         p.add_argument(flag, type=kind, help=text)
+    p.add_argument("--guide", action="store_true",
+                   help="the geometry-guided warp and its mask as a condition (pairs from make-pairs --warps); "
+                   "unguided --init weights are extended with zero-initialised inputs")
     p.add_argument("--resume", action="store_true",
                    help="continue from OUT/checkpoint.safetensors (flux: OUT/flux_checkpoint.safetensors)")
     # Flux.1-dev + LoRA (the paper's recipe; GPU): diffusion.flux_train, defaults in FluxTrainConfig
@@ -222,7 +228,7 @@ def _make_pairs(args) -> int:
     cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
     out = make_pairs(
         manifest, gaussians, args.offsets, args.out, frames=args.frames, cycle_offsets=args.cycle, cycle_config=cycle,
-        progress=not args.quiet,
+        warps=args.warps, progress=not args.quiet,
     )
     print(f"wrote {out}")
     return 0
@@ -250,6 +256,7 @@ def _train(args) -> int:
             setattr(cfg, name, getattr(args, name))
     if args.iters is not None:
         cfg.steps = args.iters
+    cfg.guide = args.guide
     record = train_restorer(args.pairs, args.out, cfg, resume=args.resume, command=args.invocation,
                             progress=not args.quiet)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "data")})
@@ -265,6 +272,8 @@ def _train_flux(args) -> int:
     for name in builtin_only:
         if getattr(args, name) is not None:
             raise InputError("train-restorer", "not used by --backend flux", "--" + name.replace("_", "-"))
+    if args.guide:
+        raise InputError("train-restorer", "not used by --backend flux", "--guide")
     cfg = FluxTrainConfig()
     names = ("batch", "crop", "lr", "seed", "threads", "checkpoint_every", "rank", "warmup",
              "grad_accum", "mixed_precision", "degraded_fraction")

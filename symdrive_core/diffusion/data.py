@@ -13,9 +13,14 @@ I_0, as sampling does from the render at the shifted camera.
 Pairs are stored as one safetensors file of uint8 images ([N, H, W, 3] ``left``, ``target``,
 ``right``) with ``offset`` and ``frame`` per sample, plus ``degraded`` [M, H, W, 3] with
 ``degraded_frame`` and ``degraded_offset`` when there are cycles; its SHA-256 identifies the
-training data. Batches are random crops (the UNet is fully convolutional) with a mirror
-augmentation that flips the images and swaps left and right, which is the same street seen in a
-mirror.
+training data. With ``warps`` each recorded frame also gets its geometry-guided warp
+(:mod:`.warp`) at the recorded camera, ``warp`` [F, H, W, 3] with ``warp_mask`` [F, H, W] and
+``warp_frame``, made from the other pair frames only: the target never contributes its own image
+(or the network would learn to copy it), and frames outside the pairs (held out) are no source.
+Batches then also carry that warp as a condition, filled where no frame saw the ground by a
+degraded start, as sampling fills it with the render. Batches are random crops (the UNet is fully
+convolutional) with a mirror augmentation that flips the images and swaps left and right, which
+is the same street seen in a mirror.
 """
 
 from __future__ import annotations
@@ -47,12 +52,13 @@ def make_pairs(
     camera: str | None = None,
     cycle_offsets=(),
     cycle_config=None,
+    warps: bool = False,
     progress: bool = True,
 ) -> Path:
     """Write ``(I_-d, I_d) -> I_0`` for every recorded frame (default: the training frames) and d,
     and the degraded starts of one cycle reconstruction per ``cycle_offsets`` entry (fitted with
     ``cycle_config``, a :class:`~symdrive_core.optim.reconstruct.ReconstructConfig`; default
-    :func:`.cycle.cycle_config`)."""
+    :func:`.cycle.cycle_config`); ``warps``: each frame's warp from the other frames (see above)."""
     from safetensors.numpy import save_file
     from tqdm import tqdm
 
@@ -64,6 +70,8 @@ def make_pairs(
     cycle_offsets = [float(d) for d in cycle_offsets]
     if any(d == 0 for d in cycle_offsets):
         raise ValueError(f"make_pairs: cycle offsets must be non-zero metres, got {cycle_offsets}")
+    if warps and not cycle_offsets:
+        raise ValueError("make_pairs: warps need cycle offsets (their degraded starts fill what no frame saw)")
     cam = manifest.camera(camera) if camera else manifest.cameras[0]
     frames = split_frames(manifest)[0] if frames is None else list(frames)
     render = SplatRenderer(gaussians)
@@ -100,6 +108,10 @@ def make_pairs(
         tensors["degraded"] = np.concatenate(degraded)
         tensors["degraded_frame"] = np.tile(np.asarray(frames, np.int32), len(cycle_offsets))
         tensors["degraded_offset"] = np.repeat(np.asarray(cycle_offsets, np.float32), len(frames))
+    if warps:
+        image, mask = pair_warps(manifest, gaussians, cam, frames, render)
+        tensors |= {"warp": conventions.to_uint8(image), "warp_mask": mask.astype(np.uint8),
+                    "warp_frame": np.asarray(frames, np.int32)}
     meta = {
         "scene": manifest.name,
         "camera": cam.name,
@@ -114,6 +126,25 @@ def make_pairs(
     with atomic_path(out) as tmp:
         save_file(tensors, str(tmp), metadata=meta)
     return out
+
+
+def pair_warps(manifest: Manifest, gaussians: Gaussians, cam, frames: list[int], render: SplatRenderer):
+    """The warps [F, H, W, 3] (0 where unseen) and masks [F, H, W] of ``frames`` at their recorded
+    cameras, computed as sampling computes them at a shifted camera (rendered depth for the
+    occluder test) but with only the other ``frames`` as sources."""
+    from .warp import package_warper
+
+    warper = package_warper(manifest, cam, gaussians)
+    warper.sources = {s: src for s, src in warper.sources.items() if s in set(frames)}
+    images, masks = [], []
+    for i in frames:
+        cf = cam.frames[i]
+        depth = render.depth(cf.K, cf.world_to_camera, cam.width, cam.height, warper.config.min_alpha)
+        w = warper.warp(i, cf.K, cf.camera_to_world, cam.width, cam.height,
+                        np.zeros((cam.height, cam.width, 3), np.float32), depth)
+        images.append(w.image)
+        masks.append(w.mask)
+    return np.stack(images), np.stack(masks)
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -157,6 +188,15 @@ class PairSet:
         self.starts = [by_frame.get(int(f), []) for f in frame.tolist()]
         if self.degraded is not None and not all(self.starts):
             raise InputError(path, "degraded starts do not cover every pair's frame", "degraded_frame")
+        # per pair, the index of its frame's warp (None: the file has no warps)
+        self.warp = self.warp_mask = self.warp_of = None
+        if "warp" in data:
+            if self.degraded is None:
+                raise InputError(path, "warps need degraded starts to fill what no frame saw", "warp")
+            self.warp = images("warp")
+            self.warp_mask = torch.from_numpy(data["warp_mask"]).float()[:, None]
+            where = {int(f): k for k, f in enumerate(data["warp_frame"].tolist())}
+            self.warp_of = [where[int(f)] for f in frame.tolist()]
 
     def __len__(self) -> int:
         return len(self.target)
@@ -165,10 +205,16 @@ class PairSet:
     def has_degraded(self) -> bool:
         return self.degraded is not None
 
+    @property
+    def has_warps(self) -> bool:
+        return self.warp is not None
+
     def batch(self, size: int, crop: int, generator: torch.Generator, degraded_fraction: float = 0.0):
-        """(left, target, right, start) random crops of ``crop`` px with random mirroring; ``start``
-        is one of the frame's degraded starts for a ``degraded_fraction`` share of the batch (when
-        the file has them), else the target itself."""
+        """(left, target, right, start, guide) random crops of ``crop`` px with random mirroring;
+        ``start`` is one of the frame's degraded starts for a ``degraded_fraction`` share of the
+        batch (when the file has them), else the target itself. With warps, ``guide`` [B, 4, h, w]
+        is the frame's warp filled by a degraded start where unseen, and its mask; a degraded
+        ``start`` is then that filled warp (as sampling starts from the warp). Else ``guide`` is None."""
         n, _, h, w = self.target.shape
         ch, cw = min(crop, h), min(crop, w)
         idx = torch.randint(0, n, (size,), generator=generator)
@@ -178,19 +224,27 @@ class PairSet:
         use = torch.zeros(size, dtype=torch.bool)
         if self.degraded is not None and degraded_fraction > 0:  # no extra draws otherwise: old runs replay
             use = torch.rand(size, generator=generator) < degraded_fraction
+        if self.degraded is not None and (degraded_fraction > 0 or self.has_warps):
             pick = torch.rand(size, generator=generator)
-        out = ([], [], [], [])
+        out = ([], [], [], [], [])
         for k in range(size):
             i, y, x = int(idx[k]), int(ys[k]), int(xs[k])
             views = [v[i] for v in (self.left, self.target, self.right)]
-            if use[k]:
+            if use[k] or self.has_warps:
                 choices = self.starts[i]
-                views.append(self.degraded[choices[int(pick[k] * len(choices))]])
+                degraded = self.degraded[choices[int(pick[k] * len(choices))]]
+            if self.has_warps:
+                j = self.warp_of[i]
+                mask = self.warp_mask[j]
+                filled = torch.where(mask > 0, self.warp[j], degraded)
+                views += [filled if use[k] else views[1], torch.cat([filled, mask])]
             else:
-                views.append(views[1])
+                views.append(degraded if use[k] else views[1])
             views = [v[:, y : y + ch, x : x + cw] for v in views]
             if flips[k]:
-                views = [views[2].flip(-1), views[1].flip(-1), views[0].flip(-1), views[3].flip(-1)]
+                views = [views[2], views[1], views[0], *views[3:]]
+                views = [v.flip(-1) for v in views]
             for lst, v in zip(out, views):
                 lst.append(v)
-        return tuple(torch.stack(v) for v in out)
+        guide = torch.stack(out[4]) if self.has_warps else None
+        return (*(torch.stack(v) for v in out[:4]), guide)

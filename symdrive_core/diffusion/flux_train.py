@@ -276,7 +276,7 @@ def train_flux_lora(
         for micro in range(cfg.grad_accum):
             g = step_generator(cfg.seed, acc.process_index, 0 if cfg.fixed_batch else step * cfg.grad_accum + micro)
             views = data.batch(cfg.batch, cfg.crop, g, cfg.degraded_fraction)
-            left, target, right, start_image = _trim(list(views), factor)
+            left, target, right, start_image = _trim(list(views[:4]), factor)
             if min(target.shape[-2:]) < factor:
                 raise InputError(data.path, f"images smaller than {factor} px cannot be packed", "target")
             with acc.accumulate(model):

@@ -24,20 +24,34 @@ from .latent import PixelSpace
 from .unet import UNet, UNetConfig
 
 DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "restorer.safetensors"
+# trained with the geometry-guided warp and its mask as conditions (scripts/train_restorer_geo.sh);
+# where it ships, the geometry-guided methods sample with it and everything else with the default
+GUIDED_WEIGHTS = DEFAULT_WEIGHTS.with_name("restorer_geo.safetensors")
 
 
 class BuiltinRestorer:
-    """The shipped UNet in pixel space (no time shift)."""
+    """The shipped UNet in pixel space (no time shift). ``guided``: the restorer the
+    geometry-guided methods sample with instead of this one (None: this one)."""
 
-    def __init__(self, net: UNet):
+    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None):
         self.net = net
+        self.guided = guided
         self.latent = PixelSpace()
 
     def time_shift(self, latent_shape) -> float:
         return 0.0
 
-    def velocity(self, z_t, t, cond_left, cond_right) -> torch.Tensor:
-        return self.net(z_t, t, cond_left, cond_right)
+    @property
+    def guide_channels(self) -> int:
+        """Channels of the geometry-guided condition it takes (0: none)."""
+        return self.net.config.guide_channels
+
+    def encode_guide(self, guide: torch.Tensor) -> torch.Tensor:
+        """Warp and mask [B, 4, H, W] in [0, 1] -> the network's [-1, 1] input."""
+        return guide * 2.0 - 1.0
+
+    def velocity(self, z_t, t, cond_left, cond_right, guide=None) -> torch.Tensor:
+        return self.net(z_t, t, cond_left, cond_right, guide)
 
     def parameters(self):
         return self.net.parameters()
@@ -80,9 +94,15 @@ def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
 
 
 def load_restorer(backend: str = "builtin", weights: str | os.PathLike | None = None, **flux_files):
-    """``builtin`` (``weights`` or the shipped file) or ``flux`` (see :func:`.flux.load_flux`)."""
+    """``builtin`` (``weights``, else the shipped file with the shipped guided restorer, where there
+    is one, for the geometry-guided methods) or ``flux`` (see :func:`.flux.load_flux`)."""
     if backend == "builtin":
-        return load_builtin(weights or DEFAULT_WEIGHTS)
+        if weights:
+            return load_builtin(weights)
+        restorer = load_builtin(DEFAULT_WEIGHTS)
+        if GUIDED_WEIGHTS.exists():
+            restorer.guided = load_builtin(GUIDED_WEIGHTS)
+        return restorer
     if backend == "flux":
         from .flux import load_flux
 

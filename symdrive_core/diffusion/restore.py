@@ -13,7 +13,10 @@ ablation: both conditions are the render at the target itself.
 Geometry-guided methods (``geo_single_view``, ``geo_ar_d<step>``) replace every render the chain
 uses (the start state and the far condition) by the recorded neighbours warped into that camera
 over the ground (:mod:`.warp`), the render kept where no frame sees the ground; ``warp`` is that
-image alone, with no restorer.
+image alone, with no restorer. A restorer trained with the warp as a condition (``guide_channels``)
+also gets the warp at the target camera and its validity mask; in the unguided methods its guide
+is the render with an empty mask (no frame seen). A restorer with a ``guided`` sibling (the shipped
+guided weights) hands the geometry-guided samples to it.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
 from ..gaussians import Gaussians
 from ..io.images import read_image
@@ -32,6 +36,7 @@ from ..scene.camera import CameraView, SeenBy
 from ..scene.ground_truth import truth_camera
 from ..splat.render import SplatRenderer
 from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
+from .warp import Warp
 
 WARP = "warp"
 GEO = "geo_"
@@ -83,7 +88,7 @@ class LateralChain:
         self.recorded = recorded
         self.warper, self.frame = warper, frame
         self._renders: dict[float, np.ndarray] = {}
-        self._warps: dict[float, np.ndarray] = {}
+        self._warps: dict[float, Warp] = {}
         self._restored: dict[tuple[bool, float, float], np.ndarray] = {}
         self.samples = 0
         self.warp_seconds: list[float] = []  # per warp computed
@@ -107,6 +112,9 @@ class LateralChain:
 
     def warp(self, offset: float) -> np.ndarray:
         """The recorded neighbours warped to ``offset`` over the ground, the render elsewhere."""
+        return self._warp(offset).image
+
+    def _warp(self, offset: float) -> Warp:
         key = round(offset, 6)
         if key not in self._warps:
             if self.warper is None:
@@ -115,7 +123,7 @@ class LateralChain:
             v = self.camera.shifted(offset)
             depth = self.render.depth(v.K, v.world_to_camera, v.width, v.height, self.warper.config.min_alpha)
             self._warps[key] = self.warper.warp(self.frame, v.K, v.camera_to_world, v.width, v.height,
-                                                self.raw(offset), depth).image
+                                                self.raw(offset), depth)
             self.warp_seconds.append(time.perf_counter() - t0)
         return self._warps[key]
 
@@ -128,11 +136,25 @@ class LateralChain:
             return self.recorded if offset == 0 else self.warp(offset)
         return self.restore(offset, method_step(method), guided=method.startswith(GEO))
 
-    def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray) -> np.ndarray:
+    def _restorer(self, guided: bool):
+        return (getattr(self.restorer, "guided", None) or self.restorer) if guided else self.restorer
+
+    def _guide(self, offset: float, guided: bool) -> torch.Tensor | None:
+        """Warp and mask at ``offset`` [1, 4, H, W] for a restorer that takes them, else None."""
+        if not getattr(self._restorer(guided), "guide_channels", 0):
+            return None
+        if guided:
+            w = self._warp(offset)
+            image, mask = w.image, w.mask
+        else:
+            image = self.raw(offset)
+            mask = np.zeros(image.shape[:2], dtype=bool)
+        return torch.cat([to_tensor(image), torch.from_numpy(mask).float()[None, None]], dim=1)
+
+    def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray, offset: float, guided: bool) -> np.ndarray:
         self.samples += 1
-        return to_numpy(
-            restore_image(self.restorer, to_tensor(left), to_tensor(right), to_tensor(init), self.sampler)
-        )
+        return to_numpy(restore_image(self._restorer(guided), to_tensor(left), to_tensor(right), to_tensor(init),
+                                      self.sampler, self._guide(offset, guided)))
 
     def restore(self, offset: float, step: float, guided: bool = False) -> np.ndarray:
         """The restored view at ``offset`` metres (positive = right) with chain step ``step``;
@@ -143,7 +165,7 @@ class LateralChain:
             key = (guided, 0.0, round(offset, 6))
             if key not in self._restored:
                 r = self._start(offset, guided)
-                self._restored[key] = self._sample(r, r, r)
+                self._restored[key] = self._sample(r, r, r, offset, guided)
             return self._restored[key]
         prev, prev_pos = self.recorded, 0.0
         for pos in chain_positions(offset, step):
@@ -151,7 +173,7 @@ class LateralChain:
             if key not in self._restored:
                 far = self._start(2 * pos - prev_pos, guided)
                 left, right = (prev, far) if pos > 0 else (far, prev)
-                self._restored[key] = self._sample(left, right, self._start(pos, guided))
+                self._restored[key] = self._sample(left, right, self._start(pos, guided), pos, guided)
             prev, prev_pos = self._restored[key], pos
         return prev
 

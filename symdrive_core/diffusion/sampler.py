@@ -62,8 +62,10 @@ def restore_image(
     right: torch.Tensor,
     init: torch.Tensor | None,
     config: SamplerConfig = DEFAULT,
+    guide: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """The centre view between ``left`` and ``right``; ``init`` seeds the start at ``n_start``."""
+    """The centre view between ``left`` and ``right``; ``init`` seeds the start at ``n_start``;
+    ``guide`` [B, 4, H, W] (warp and mask at the target camera) reaches restorers that take one."""
     if config.n_start > 0 and init is None:
         raise ValueError("n_start > 0 needs an initialisation image")
     lat = restorer.latent
@@ -71,15 +73,18 @@ def restore_image(
     ts = flow.timesteps(config.steps, restorer.time_shift(zl.shape))
     g = generator(config.seed)
     z0 = lat.encode(init) if init is not None else torch.zeros_like(zl)
+    zg = restorer.encode_guide(guide) if guide is not None and getattr(restorer, "guide_channels", 0) else None
     k = max(1, int(config.samples))
     if k > 1:
         zl, zr, z0 = (x.repeat_interleave(k, dim=0) for x in (zl, zr, z0))
+        zg = None if zg is None else zg.repeat_interleave(k, dim=0)
     z = flow.start_state(z0, ts, config.n_start, g)
     velocity = restorer.velocity
     if config.max_memory_gib is not None:
         from .tiling import tiled_velocity
 
         velocity = tiled_velocity(restorer, z.shape, config.tiling())
-    z = flow.euler(lambda zt, t: velocity(zt, t, zl, zr), z, ts, start=config.n_start)
+    z = flow.euler(lambda zt, t: velocity(zt, t, zl, zr, zg) if zg is not None else velocity(zt, t, zl, zr),
+                   z, ts, start=config.n_start)
     out = lat.decode(z)
     return out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out

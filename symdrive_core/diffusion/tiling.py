@@ -266,11 +266,11 @@ def tiled_velocity(restorer, shape, options: TileOptions):
     """``restorer.velocity`` with the same signature, evaluated on tiles per ``options``."""
     plan = plan_for(restorer, shape, options)
 
-    def velocity(z_t, t, cond_left, cond_right):
+    def velocity(z_t, t, cond_left, cond_right, guide=None):
+        conds = (cond_left, cond_right) if guide is None else (cond_left, cond_right, guide)
         if tuple(z_t.shape) != tuple(shape):
-            return tiled_call(restorer.velocity, plan_for(restorer, z_t.shape, options), z_t, t, cond_left,
-                              cond_right)
-        return tiled_call(restorer.velocity, plan, z_t, t, cond_left, cond_right)
+            return tiled_call(restorer.velocity, plan_for(restorer, z_t.shape, options), z_t, t, *conds)
+        return tiled_call(restorer.velocity, plan, z_t, t, *conds)
 
     velocity.plan = plan
     return velocity

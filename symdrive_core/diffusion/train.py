@@ -15,6 +15,10 @@ network's correction under the ``skip`` output).
 When the pairs file has degraded starts (cycle reconstructions), a ``degraded_fraction`` share
 of each batch starts its noisy state from one of them and learns the velocity back to the
 recorded image (``flow.flow_loss``'s ``x_start``). ``init`` continues from trained weights.
+
+``guide`` trains the network with the geometry-guided warp and its mask as a fourth condition
+(pairs made with ``warps``); from unguided ``init`` weights the new inputs start at zero
+(:func:`.unet.with_guide`), so fine-tuning starts from exactly the network it extends.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
 from .data import PairSet, file_sha256
 from .models import BuiltinRestorer, load_builtin, save_builtin
-from .unet import UNet, UNetConfig
+from .unet import GUIDE_CHANNELS, UNet, UNetConfig, with_guide
 
 CHECKPOINT = "checkpoint.safetensors"
 WEIGHTS = "restorer.safetensors"
@@ -61,9 +65,11 @@ class TrainConfig:
     degraded_fraction: float = 0.5
     start_t_min: float = 0.1  # their lowest noise level (see flow.flow_loss)
     init: str | None = None  # restorer weights to start from (default: a fresh network)
+    guide: bool = False  # the warp and its mask as a condition (pairs with warps)
 
     def unet(self) -> UNetConfig:
-        return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output)
+        return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output,
+                          guide_channels=GUIDE_CHANNELS if self.guide else 0)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -146,10 +152,14 @@ def train_restorer(
     out = Path(out)
     torch.set_num_threads(cfg.threads)
     data = PairSet(pairs)
+    if cfg.guide and not data.has_warps:
+        raise InputError(pairs, "training with the guide needs pairs with warps (`symdrive make-pairs --warps`)")
     torch.manual_seed(cfg.seed)
     net = UNet(cfg.unet())
     if cfg.init:
         start_from = load_builtin(cfg.init).net
+        if cfg.guide and not start_from.config.guide_channels:
+            start_from = with_guide(start_from, GUIDE_CHANNELS)
         if start_from.config != net.config:
             raise InputError(cfg.init, f"its UNet {start_from.config} is not the one configured ({net.config})")
         net.load_state_dict(start_from.state_dict())
@@ -173,11 +183,12 @@ def train_restorer(
     )
     for step in bar:
         g = step_generator(cfg.seed, step)
-        left, target, right, start_image = data.batch(cfg.batch, cfg.crop, g, cfg.degraded_fraction)
+        left, target, right, start_image, guide = data.batch(cfg.batch, cfg.crop, g, cfg.degraded_fraction)
         lat = model.latent
         zl, zr = lat.encode(left), lat.encode(right)
+        zg = model.encode_guide(guide) if cfg.guide else None
         loss = flow.flow_loss(
-            lambda z, t, zl=zl, zr=zr: model.velocity(z, t, zl, zr),
+            lambda z, t, zl=zl, zr=zr, zg=zg: model.velocity(z, t, zl, zr, zg),
             lat.encode(target),
             g,
             t_max=cfg.t_max,

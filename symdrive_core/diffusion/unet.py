@@ -12,7 +12,7 @@ of a 0.5-1 m lateral step at this resolution.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import torch
 import torch.nn.functional as F
@@ -34,6 +34,9 @@ class UNetConfig:
     # the prior spread exactly), so an undertrained model stays close to the mean.
     cond_sigma: float = 0.1
     data_sigma: float = 0.4  # RMS of images in [-1, 1] units (input scaling of z_t)
+    # extra input channels after the three views: 4 for the geometry-guided warp of the target
+    # camera and its validity mask (see ``with_guide``); 0 for the unguided network
+    guide_channels: int = 0
 
     def to_json(self) -> dict:
         return {**asdict(self), "mults": list(self.mults)}
@@ -93,7 +96,7 @@ class UNet(nn.Module):
         widths = [w * m for m in config.mults]
         tdim = 4 * w
         self.time_mlp = nn.Sequential(nn.Linear(w, tdim), nn.SiLU(), nn.Linear(tdim, tdim))
-        self.inp = nn.Conv2d(3 * c, widths[0], 3, padding=1)
+        self.inp = nn.Conv2d(3 * c + config.guide_channels, widths[0], 3, padding=1)
         self.down = nn.ModuleList()
         self.downsample = nn.ModuleList()
         prev = widths[0]
@@ -119,8 +122,11 @@ class UNet(nn.Module):
         return 2 ** (len(self.config.mults) - 1)
 
     def forward(
-        self, z_t: torch.Tensor, t: torch.Tensor, cond_left: torch.Tensor, cond_right: torch.Tensor
+        self, z_t: torch.Tensor, t: torch.Tensor, cond_left: torch.Tensor, cond_right: torch.Tensor,
+        guide: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        """``guide`` [B, guide_channels, H, W]: required when the network has guide channels, and
+        ignored when it has none (an unguided network runs the guided methods as it always did)."""
         h, w = z_t.shape[-2:]
         m = self.multiple
         pad = (0, (-w) % m, 0, (-h) % m)
@@ -130,7 +136,12 @@ class UNet(nn.Module):
         if residual:
             sd = self.config.data_sigma
             z_in = z_t / torch.sqrt((1 - tb) ** 2 * sd**2 + tb**2)
-        x = F.pad(torch.cat([cond_left, z_in, cond_right], dim=1), pad, mode="replicate")
+        views = [cond_left, z_in, cond_right]
+        if self.config.guide_channels:
+            if guide is None:
+                raise ValueError(f"this restorer takes a {self.config.guide_channels}-channel guide (warp and mask)")
+            views.append(guide.to(z_t.dtype))
+        x = F.pad(torch.cat(views, dim=1), pad, mode="replicate")
         temb = self.time_mlp(time_embedding(t, self.config.width))
         x = self.inp(x)
         skips = []
@@ -162,3 +173,20 @@ class UNet(nn.Module):
         s2 = self.config.cond_sigma**2
         tb = t.clamp(1e-4, 1.0)
         return ((1 - tb) ** 2 * s2 + tb**2) / s2
+
+
+GUIDE_CHANNELS = 4  # the warp (3) and its validity mask (1)
+
+
+def with_guide(net: UNet, channels: int = GUIDE_CHANNELS) -> UNet:
+    """``net`` with ``channels`` guide inputs whose first-layer weights are zero: it computes
+    exactly what ``net`` does whatever the guide, so fine-tuning starts from the trained network
+    and only learns what the guide adds."""
+    if net.config.guide_channels:
+        raise ValueError("the network already has guide channels")
+    out = UNet(replace(net.config, guide_channels=channels))
+    state = dict(net.state_dict())
+    w = state["inp.weight"]
+    state["inp.weight"] = torch.cat([w, w.new_zeros(w.shape[0], channels, *w.shape[2:])], dim=1)
+    out.load_state_dict(state)
+    return out

@@ -62,9 +62,9 @@ def test_pairs_carry_degraded_starts_and_batches_use_them(synthetic_package, tmp
     pairs = PairSet(path)
     assert pairs.has_degraded and pairs.starts == [[0, 2], [1, 3]]
     g = torch.Generator().manual_seed(0)
-    left, target, right, start = pairs.batch(16, 48, g, degraded_fraction=0.0)
+    left, target, right, start, _ = pairs.batch(16, 48, g, degraded_fraction=0.0)
     assert torch.equal(start, target)
-    left, target, right, start = pairs.batch(32, 48, torch.Generator().manual_seed(1), degraded_fraction=1.0)
+    left, target, right, start, _ = pairs.batch(32, 48, torch.Generator().manual_seed(1), degraded_fraction=1.0)
     for k in range(32):  # full-width crops: each start is a degraded image of the target's frame
         i = next(i for i in range(2) if torch.equal(pairs.target[i], target[k])
                  or torch.equal(pairs.target[i].flip(-1), target[k]))

@@ -55,7 +55,7 @@ def synthetic_pairs(path, n=6, h=20, w=28, seed=0):
 
 def test_batches_mirror_by_flipping_and_swapping(tmp_path):
     data = PairSet(synthetic_pairs(tmp_path / "p.safetensors"))
-    left, target, right, start = data.batch(64, 12, torch.Generator().manual_seed(0))
+    left, target, right, start, _ = data.batch(64, 12, torch.Generator().manual_seed(0))
     assert torch.equal(start, target)  # no degraded starts in this file
     assert left.shape == (64, 3, 12, 12)
     crops = {}
