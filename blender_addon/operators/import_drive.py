@@ -31,6 +31,7 @@ def _importer(name: str):
     return importlib.import_module(f"{CORE}.importers.{name}")
 
 
+DEFAULT_FPS = _importer("frames").DEFAULT_FPS  # the command line's --fps default, one value
 COLMAP_FILES = ("cameras", "images", "points3D", "rigs", "frames")  # the .bin/.txt files of a model
 
 
@@ -49,7 +50,7 @@ def colmap_images(model: Path) -> Path:
     return next((c for c in candidates if c.is_dir()), candidates[1])
 
 
-def read_drive(path: str | Path, images: str | Path | None = None, fps: float = 10.0):
+def read_drive(path: str | Path, images: str | Path | None = None, fps: float = DEFAULT_FPS):
     """(format, Grouped views) of a nerfstudio transforms.json, a 3DGS trainer's cameras.json or a
     COLMAP model folder."""
     path = Path(path)
@@ -151,7 +152,7 @@ class SYMDRIVE_OT_import_drive(bpy.types.Operator, ImportHelper):
     )
     fps: FloatProperty(
         name="Frame rate",
-        default=10.0,
+        default=DEFAULT_FPS,
         min=0.1,
         max=1000.0,
         description="Frames per second when the file has no timestamps",
