@@ -17,7 +17,7 @@ from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
 from ..scene.ground_truth import lateral_views, split_frames
-from ..splat.render import SplatRenderer, render_gaussians
+from ..splat.render import SplatRenderer
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
@@ -27,10 +27,10 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     if not frames:
         raise ValueError("evaluate_heldout: the package holds out no frames")
     cam = manifest.camera(camera) if camera else manifest.cameras[0]
-    scores = []
+    render, scores = SplatRenderer(gaussians), []  # the parameters are converted once, not per frame
     for i in frames:
         cf = cam.frames[i]
-        pred = render_gaussians(gaussians, cf.K, cf.world_to_camera, cam.width, cam.height)
+        pred = render(cf.K, cf.world_to_camera, cam.width, cam.height)
         scores.append(score_view(pred, read_image(manifest.resolve(cf.image), channels=3), None))
     p, s = np.mean(scores, axis=0)
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}

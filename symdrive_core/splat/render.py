@@ -69,8 +69,3 @@ class SplatRenderer:
         """The render at the camera moved ``offset_m`` along its own +x (right)."""
         c2w = conventions.lateral_shift(camera_to_world, offset_m)
         return self(K, conventions.invert_rigid(c2w), width, height)
-
-
-def render_gaussians(g: Gaussians, K, world_to_camera, width: int, height: int) -> np.ndarray:
-    """Render stored Gaussians once at one camera; [H,W,3] numpy in [0, 1]."""
-    return SplatRenderer(g)(K, world_to_camera, width, height)
