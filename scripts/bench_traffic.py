@@ -3,7 +3,7 @@
 Part 1: a straight two-lane road long enough that ``--density`` vehicles/km/lane gives N
 vehicles at the start; SUMO simulates ``--seconds``; we time netconvert + SUMO + FCD reading +
 pose resampling + the overlap check, median of ``--repeat`` runs.
-Part 2 (when ``symdrive_core.splat.compose.render_layers`` is available): each vehicle becomes a
+Part 2 (when ``symdrive_core.splat.render.render_layers`` is available): each vehicle becomes a
 synthetic ~4k-Gaussian SH-degree-3 asset; frames of the simulated traffic are rendered from an
 elevated camera behind the traffic, vehicles only (no background), and timed per frame.
 """
@@ -86,7 +86,7 @@ def bench_render(args, kept: dict) -> None:
     try:
         import torch
 
-        from symdrive_core.splat.compose import Layer, render_layers
+        from symdrive_core.splat.render import Layer, render_layers
     except ModuleNotFoundError as exc:
         print(f"\nrender: not measured ({exc})")
         return

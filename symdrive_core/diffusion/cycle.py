@@ -33,11 +33,9 @@ def shifted_views(views: list[View], render: SplatRenderer, offset_m: float) -> 
     """The recorded views moved ``offset_m`` along their own +x, with ``render``'s images there."""
     out = []
     for v in views:
-        c2w = conventions.lateral_shift(np.linalg.inv(v.viewmat.numpy().astype(np.float64)), offset_m)
-        w2c = conventions.invert_rigid(c2w)
-        image = render(v.K.numpy(), w2c, v.width, v.height)
-        out.append(View(v.frame, v.K, torch.tensor(w2c, dtype=torch.float32), torch.from_numpy(image), None,
-                        v.width, v.height))
+        camera = v.camera.shifted(offset_m)
+        out.append(View(v.frame, v.K, torch.tensor(camera.world_to_camera, dtype=torch.float32),
+                        torch.from_numpy(render(camera)), None, v.width, v.height))
     return out
 
 
@@ -61,4 +59,4 @@ def cycle_renders(
     initial = initial_gaussians(manifest, recorded, cfg)
     fitted, _ = fit(shifted, initial, cfg, progress=progress, desc=f"cycle {offset_m:+g} m")
     back = SplatRenderer(fitted)
-    return np.stack([conventions.to_uint8(back(v.K.numpy(), v.viewmat.numpy(), v.width, v.height)) for v in recorded])
+    return np.stack([conventions.to_uint8(back(v.camera)) for v in recorded])

@@ -39,6 +39,7 @@ from ..gaussians import Gaussians
 from ..io.atomic import atomic_path
 from ..io.images import read_image
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from ..splat.render import SplatRenderer
 
 
@@ -85,9 +86,10 @@ def make_pairs(
                 f"cameras.{cam.name}.frames[{i}].image",
             )
         gt = conventions.to_uint8(read_image(manifest.resolve(cf.image), channels=3))
+        view = CameraView.of_frame(cam, i)
         for d in offsets:
-            left.append(conventions.to_uint8(render.shifted(cf.K, cf.camera_to_world, -d, cam.width, cam.height)))
-            right.append(conventions.to_uint8(render.shifted(cf.K, cf.camera_to_world, d, cam.width, cam.height)))
+            left.append(conventions.to_uint8(render(view.shifted(-d))))
+            right.append(conventions.to_uint8(render(view.shifted(d))))
             target.append(gt)
             offs.append(d)
             idx.append(i)
@@ -139,7 +141,7 @@ def pair_warps(manifest: Manifest, gaussians: Gaussians, cam, frames: list[int],
     images, masks = [], []
     for i in frames:
         cf = cam.frames[i]
-        depth = render.depth(cf.K, cf.world_to_camera, cam.width, cam.height, warper.config.min_alpha)
+        depth = render.depth(CameraView.of_frame(cam, i), warper.config.min_alpha)
         w = warper.warp(i, cf.K, cf.camera_to_world, cam.width, cam.height,
                         np.zeros((cam.height, cam.width, 3), np.float32), depth)
         images.append(w.image)

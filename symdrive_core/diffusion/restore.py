@@ -100,14 +100,14 @@ class LateralChain:
         no recorded image starts from the render at its camera."""
         cf = cam.frames[frame]
         recorded = (read_image(manifest.resolve(cf.image), channels=3) if cf.image
-                    else render(cf.K, cf.world_to_camera, cam.width, cam.height))
+                    else render(CameraView.of_frame(cam, frame)))
         return cls(restorer, render, recorded, CameraView.of_frame(cam, frame), sampler, warper, frame)
 
     def raw(self, offset: float) -> np.ndarray:
         key = round(offset, 6)
         if key not in self._renders:
             v = self.camera.shifted(offset)
-            self._renders[key] = self.render(v.K, v.world_to_camera, v.width, v.height)
+            self._renders[key] = self.render(v)
         return self._renders[key]
 
     def warp(self, offset: float) -> np.ndarray:
@@ -121,7 +121,7 @@ class LateralChain:
                 raise ValueError("geometry-guided restoration needs a chain made with a warper")
             t0 = time.perf_counter()
             v = self.camera.shifted(offset)
-            depth = self.render.depth(v.K, v.world_to_camera, v.width, v.height, self.warper.config.min_alpha)
+            depth = self.render.depth(v, self.warper.config.min_alpha)
             self._warps[key] = self.warper.warp(self.frame, v.K, v.camera_to_world, v.width, v.height,
                                                 self.raw(offset), depth)
             self.warp_seconds.append(time.perf_counter() - t0)
@@ -251,10 +251,12 @@ def run_lateral_restoration(
     frames: list[int] | None = None,
     progress: bool = True,
     warper=None,
+    render: SplatRenderer | None = None,
 ) -> LateralRestoration:
     """Restore every lateral ground-truth view of the package (or of ``frames``) with each
     method, score it against the Cycles image, and keep the restored views. ``warper``: the
-    lateral camera's, for the geometry-guided methods (default: fitted here when they are asked for)."""
+    lateral camera's, for the geometry-guided methods (default: fitted here when they are asked for);
+    ``render``: a renderer of ``gaussians`` the caller already holds."""
     from tqdm import tqdm
 
     targets = lateral_targets(manifest, frames)
@@ -262,7 +264,7 @@ def run_lateral_restoration(
     for m in methods:
         if m != WARP:
             method_step(m)  # an unknown name fails before any work
-    render = SplatRenderer(gaussians)
+    render = render or SplatRenderer(gaussians)
     cam = truth_camera(manifest)
     if warper is None and needs_warp(methods):
         warper = _warper(manifest, cam, gaussians)

@@ -239,10 +239,11 @@ def package_warper(manifest, cam, gaussians=None, config: WarpConfig = DEFAULT) 
         if cf.depth:
             depth, tol = read_image(manifest.resolve(cf.depth), channels=1)[..., 0], config.depth_tolerance
         elif gaussians is not None:
+            from ..scene.camera import CameraView
             from ..splat.render import SplatRenderer
 
             renderer = renderer or SplatRenderer(gaussians)
-            depth = renderer.depth(cf.K, cf.world_to_camera, cam.width, cam.height, config.min_alpha)
+            depth = renderer.depth(CameraView.of_frame(cam, fi), config.min_alpha)
             tol = config.rendered_depth_tolerance
         else:
             raise WarpError(f"{where}: cameras.{cam.name}.frames[{fi}] has no depth and there are no background "

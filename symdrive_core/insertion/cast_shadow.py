@@ -25,9 +25,9 @@ from ..conventions import linear_to_srgb, srgb_to_linear
 from ..gaussians import Gaussians
 from ..scene import Pose
 from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
+from ..splat.frozen_view import FrozenView
 from ..splat.projection import quat_to_rotmat
 from ..splat.rasterize import RasterizePixels, bin_gaussians
-from .composite import InsertionView
 from .place import place
 from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z
 
@@ -175,7 +175,7 @@ def vehicle_shadow_map(vehicle: Gaussians, pose: Pose, wlh, sun_direction) -> Sh
                       bounds=shadow_window(pose, wlh, sun_direction))
 
 
-def vehicle_shadow(view: InsertionView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
+def vehicle_shadow(view: FrozenView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
                    ratio: float) -> CastShadow | None:
     """The shadow ``vehicle`` (its own frame) casts at ``pose`` in ``view``; None when the sun is down."""
     smap = vehicle_shadow_map(vehicle, pose, wlh, sun_direction)

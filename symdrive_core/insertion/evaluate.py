@@ -23,13 +23,14 @@ from ..io.images import read_image, read_mask
 from ..io.ply import write_splats
 from ..metrics import bbox_crop, psnr, ssim
 from ..optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
-from ..scene import Manifest
+from ..scene import Manifest, Pose
 from ..scene.camera import CameraView
 from ..scene.ground_truth import split_frames
+from ..splat.frozen_view import FrozenView
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
 from .cast_shadow import CastShadow, vehicle_shadow
-from .composite import InsertionView
+from .composite import insertion_view
 from .features import crop_frechet, vehicle_crop
 from .harmonizer import Harmonizer, restorer_harmonizer
 from .placements import HeldOut, camera_view, held_out_placements, training_views
@@ -54,7 +55,8 @@ class InsertedFrame:
     plain: np.ndarray  # the naive render [H, W, 3]
     vehicle_alpha: np.ndarray  # [H, W]
     region: np.ndarray  # [H, W] bool: vehicle ∪ shadow region (what harmonization may change)
-    view: InsertionView
+    view: FrozenView
+    pose: Pose  # the vehicle's
     shadow: CastShadow | None = None  # None: no sun, or shadows off
 
 
@@ -62,7 +64,7 @@ def insert_frame(manifest: Manifest, background, vehicle: Gaussians, pose, wlh, 
                  shadow_px: int = 3) -> InsertedFrame:
     """Render one insertion (with the shadow it casts where the scene has a sun) and the region
     harmonization may change."""
-    view = InsertionView(camera, background, vehicle, pose)
+    view = insertion_view(camera, background, vehicle, pose)
     rgb, alpha = view.render_numpy(vehicle)
     eff = manifest.effects
     region, cast = None, None
@@ -71,7 +73,7 @@ def insert_frame(manifest: Manifest, background, vehicle: Gaussians, pose, wlh, 
                                camera.height, dilate_px=shadow_px)
         cast = vehicle_shadow(view, vehicle, pose, wlh, eff.sun_direction, eff.shade)
     image = rgb if cast is None else cast.apply(rgb, alpha)
-    return InsertedFrame(image, rgb, alpha, harmonization_region(alpha, region), view, cast)
+    return InsertedFrame(image, rgb, alpha, harmonization_region(alpha, region), view, pose, cast)
 
 
 def finetune_sample(frame: InsertedFrame, target: np.ndarray, background, vehicle: Gaussians,
@@ -80,7 +82,7 @@ def finetune_sample(frame: InsertedFrame, target: np.ndarray, background, vehicl
     loss looks at the vehicle and a thin ring of background, minus the ring's shadowed pixels
     (the fine-tune renders no shadow, and must not grow the car to imitate one)."""
     rows, cols = bbox_crop(frame.region, cfg.crop_margin)
-    view = InsertionView(frame.view.camera.crop(rows, cols), background, vehicle, frame.view.pose)
+    view = insertion_view(frame.view.camera.crop(rows, cols), background, vehicle, frame.pose)
     on_car = frame.vehicle_alpha > 0.01
     mask = dilate(on_car, cfg.loss_ring_px)
     if frame.shadow is not None:

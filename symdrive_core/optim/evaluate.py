@@ -16,6 +16,7 @@ from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..metrics import psnr, ssim
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from ..scene.ground_truth import lateral_views, split_frames
 from ..splat.render import SplatRenderer
 
@@ -30,7 +31,7 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     render, scores = SplatRenderer(gaussians), []  # the parameters are converted once, not per frame
     for i in frames:
         cf = cam.frames[i]
-        pred = render(cf.K, cf.world_to_camera, cam.width, cam.height)
+        pred = render(CameraView.of_frame(cam, i))
         scores.append(score_view(pred, read_image(manifest.resolve(cf.image), channels=3), None))
     p, s = np.mean(scores, axis=0)
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
@@ -87,15 +88,16 @@ def lateral_rows(scores: dict[tuple[float, str], list], seconds: dict[str, float
 
 
 def evaluate_lateral(manifest: Manifest, gaussians: Gaussians, method: str = "raw_3dgs",
-                     frames: list[int] | None = None) -> list[dict]:
-    """Rows for a reconstruction rendered as is (``raw_3dgs``, ``refined``) on the same views."""
-    render = SplatRenderer(gaussians)
+                     frames: list[int] | None = None, *, render: SplatRenderer | None = None) -> list[dict]:
+    """Rows for a reconstruction rendered as is (``raw_3dgs``, ``refined``) on the same views
+    (``render``: a renderer of ``gaussians`` the caller already holds)."""
+    render = render or SplatRenderer(gaussians)
     scores: dict[tuple[float, str], list] = {}
     ceilings: dict[float, list[float]] = {}
     targets = lateral_targets(manifest, frames)
     truths = lane_truths(manifest, targets)
     for v in targets:
-        img = render(v.K, v.world_to_camera, v.width, v.height)
+        img = render(v.camera)
         gt = read_image(manifest.resolve(v.image), channels=3)
         lanes = with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
         scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))

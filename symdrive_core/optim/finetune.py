@@ -3,7 +3,7 @@
 The paper fixes the vehicle's geometry and fits only what lighting changes: the SH coefficients
 and the opacity logits of its Gaussians, with L1 + lambda (1 - SSIM) over every harmonized
 placement. Means, scales and rotations are never handed to the optimiser and come back
-bit-identical. Each view is projected once (:class:`~symdrive_core.insertion.composite.InsertionView`),
+bit-identical. Each view is projected once (:class:`~symdrive_core.splat.frozen_view.FrozenView`),
 so every step only re-evaluates colours and back-propagates through compositing.
 """
 
@@ -17,7 +17,7 @@ import torch
 from tqdm import tqdm
 
 from ..gaussians import Gaussians
-from ..insertion.composite import InsertionView
+from ..splat.frozen_view import FrozenView
 from .losses import photometric
 
 
@@ -33,7 +33,7 @@ class FinetuneConfig:
 
 @dataclass
 class FinetuneSample:
-    view: InsertionView  # the placement's camera window, projected once
+    view: FrozenView  # the placement's camera window, projected once
     target: np.ndarray  # [H, W, 3] harmonized image of that window
     mask: np.ndarray  # [H, W] pixels the loss looks at (the vehicle and a thin ring)
 

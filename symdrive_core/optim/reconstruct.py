@@ -26,6 +26,7 @@ from ..io.images import read_image
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from ..scene.ground_truth import split_frames
 from ..splat.render import params_from_gaussians, render_params
 from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
@@ -69,6 +70,11 @@ class View:
     depth: torch.Tensor | None  # [H,W], 0 = sky / unknown
     width: int
     height: int
+
+    @property
+    def camera(self) -> CameraView:
+        """This view's camera (float64 from the stored float32 matrices) for renderers of stored Gaussians."""
+        return CameraView(self.viewmat.double().numpy(), self.K.double().numpy(), self.width, self.height)
 
 
 def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:

@@ -159,7 +159,7 @@ def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool,
         v = lateral[0]
         restored = tree.frame("restore", f"{manifest.cameras[0].name}/{v.offset_m:+g}", fi)
         panels = [("recorded view (0 m)", read_image(manifest.resolve(manifest.cameras[0].frames[fi].image), channels=3)),
-                  ("raw 3DGS at +3 m", SplatRenderer(background)(v.K, v.world_to_camera, v.width, v.height)),
+                  ("raw 3DGS at +3 m", SplatRenderer(background)(v.camera)),
                   ("restored at +3 m", read_image(restored, channels=3)),
                   ("Cycles at +3 m", read_image(manifest.resolve(v.image), channels=3))]
         _montage(figures / "lateral.png", panels)

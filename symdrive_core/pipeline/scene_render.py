@@ -23,6 +23,7 @@ from ..gaussians import Gaussians
 from ..io.images import write_image, write_mask
 from ..io.ply import read_splats
 from ..scene import Manifest
+from ..scene.camera import CameraView
 from .outputs import ASSET_CACHE, OutputTree
 from .plan import Plan
 
@@ -103,17 +104,18 @@ class SceneRenderer:
                 self.actors[a.id] = g if isinstance(g, GaussianTensors) else GaussianTensors.from_gaussians(
                     g, device=self.device)
 
-    def camera(self, camera: str, frame: int, lateral_offset_m: float = 0.0):
+    def view(self, camera: str, frame: int, lateral_offset_m: float = 0.0) -> CameraView:
+        """Camera ``camera`` at ``frame``, moved ``lateral_offset_m`` along its own +x."""
         cam = self.manifest.camera(camera)
         cf = cam.frames[frame]
         c2w = conventions.lateral_shift(cf.camera_to_world, lateral_offset_m) if lateral_offset_m else cf.camera_to_world
-        return cam, conventions.invert_rigid(c2w), cf.K
+        return CameraView(conventions.invert_rigid(c2w), cf.K, cam.width, cam.height)
 
     def render(self, camera: str, frame: int, actor_ids: list[str] | None = None, *,
                lateral_offset_m: float = 0.0, with_background: bool = True) -> FrameRender:
-        from ..splat.compose import Layer, render_layers
+        from ..splat.render import Layer, render_layers
 
-        cam, w2c, K = self.camera(camera, frame, lateral_offset_m)
+        view = self.view(camera, frame, lateral_offset_m)
         ids = [a.id for a in self.manifest.actors if a.pose(frame) is not None] if actor_ids is None else actor_ids
         layers = []
         if with_background and self.background is not None:
@@ -129,8 +131,8 @@ class SceneRenderer:
                                 torch.as_tensor(pose.R, dtype=torch.float32, device=self.device),
                                 torch.as_tensor(pose.translation, dtype=torch.float32, device=self.device),
                                 actor.instance_id))
-        out = render_layers(layers, torch.as_tensor(w2c, dtype=torch.float64, device=self.device),
-                            torch.as_tensor(K, dtype=torch.float32, device=self.device), cam.width, cam.height,
+        out = render_layers(layers, torch.as_tensor(view.world_to_camera, dtype=torch.float64, device=self.device),
+                            torch.as_tensor(view.K, dtype=torch.float32, device=self.device), view.width, view.height,
                             background=self.background_color, antialiased=self.antialiased)
         by_instance = {a.instance_id: a.id for a in self.manifest.actors}
         instance = {}

@@ -163,6 +163,7 @@ def restore_stage(ctx) -> StageResult:
 
     m, opts = ctx.manifest, ctx.options
     g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
+    render = SplatRenderer(g)  # one parameter conversion for scoring, chains and the remaining views
     plain = f"ar_d{opts.ar_step:g}" if opts.ar_step > 0 else "single_view"
     warpers: dict = {}  # by camera name: the geometry-guided chain's warper, None where it has none
     details: dict = {}
@@ -185,15 +186,15 @@ def restore_stage(ctx) -> StageResult:
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
-                                      progress=ctx.progress, warper=warpers.get(truth_camera(m).name))
-        metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", opts.frames) + res.rows
+                                      progress=ctx.progress, warper=warpers.get(truth_camera(m).name),
+                                      render=render)
+        metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", opts.frames, render=render) + res.rows
         ctx.shared.restored = list(res.views[default])
         cam_name = truth_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
         for v in ctx.shared.restored:
             write_image(ctx.tree.frame("restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
             done.add((cam_name, v.frame, round(v.offset_m, 6)))
-    render = SplatRenderer(g)
     jobs = [(cam, fi, off) for cam in m.cameras for fi in (opts.frames or range(len(cam.frames)))
             for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):

@@ -313,7 +313,7 @@ class SymDriveEnv(gym.Env):
         background is the restorer's (:mod:`.restore`) with the traffic rendered over it."""
         import torch
 
-        from ..splat.compose import Layer, render_layers
+        from ..splat.render import Layer, render_layers
 
         t0 = time.perf_counter()
         r = self.renderer

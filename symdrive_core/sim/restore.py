@@ -77,14 +77,14 @@ class OnlineRestorer:
             cf = cam.frames[fi]
             w, h = env.image_size(cam)
             K = conventions.scale_intrinsics(cf.K, w / cam.width, h / cam.height)
+            view = CameraView(cf.world_to_camera, K, w, h)
             if cf.image:
                 from ..io.images import read_image
 
                 recorded = _resize(read_image(m.resolve(cf.image), channels=3), w, h)
             else:
-                recorded = self._render(K, cf.world_to_camera, w, h)
-            self.chains[key] = LateralChain(self.model, self._render, recorded,
-                                            CameraView(cf.world_to_camera, K, w, h), self.sampler())
+                recorded = self._render(view)
+            self.chains[key] = LateralChain(self.model, self._render, recorded, view, self.sampler())
         return self.chains[key]
 
     def background(self, camera: str, c2w: np.ndarray) -> np.ndarray | None:

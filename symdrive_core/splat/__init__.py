@@ -18,8 +18,9 @@ _EXPORTS = {
     "eval_sh": ".sh",
     "sh_to_color": ".sh",
     "GaussianTensors": ".tensors",
-    "Layer": ".compose",
-    "render_layers": ".compose",
+    "Layer": ".render",
+    "render_layers": ".render",
+    "SplatRenderer": ".render",
     "render_oracle": ".oracle",
     "project_gaussians": ".projection",
 }

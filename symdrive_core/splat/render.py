@@ -1,10 +1,16 @@
-"""Stored Gaussians to images: the one place that turns parameters into what the rasterizer takes.
+"""Gaussians plus a view to an image: the one entry above the rasterizer.
 
-Trainable parameters are kept raw (``quats`` unnormalised, ``log_scales``, ``opacity_logits``, SH
-split into ``sh0`` and ``shN``: the 3DGS layout the optimisers step on); :func:`render_params`
-activates them and calls :func:`~.rasterize.rasterize`, for training and for every renderer of
-stored Gaussians (:class:`SplatRenderer`: reconstruction scores, pairs, lateral chains, the
-simulator's restored views).
+Every render of Gaussians goes through here (the frozen-geometry views of fine-tuning excepted,
+:mod:`.frozen_view`, which re-composite one projection many times):
+
+* :func:`render_layers`: activated Gaussians (:class:`~.tensors.GaussianTensors`) as a background and
+  rigidly moving actors (:mod:`.compose`), with per-actor instance channels: package frames, the
+  simulator, benchmarks.
+* :func:`render_params`: trainable parameters as the optimisers keep them (``quats`` unnormalised,
+  ``log_scales``, ``opacity_logits``, SH split into ``sh0`` and ``shN``: the 3DGS layout), activated
+  here and nowhere else.
+* :class:`SplatRenderer`: stored Gaussians seen by a :class:`~symdrive_core.scene.camera.CameraView`
+  (reconstruction scores, pairs, lateral chains, the simulator's restored views).
 """
 
 from __future__ import annotations
@@ -12,8 +18,36 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .. import conventions
 from ..gaussians import Gaussians, sh_coeff_count
+from ..scene.camera import CameraView
+from .compose import Layer, compose_layers
+from .constants import ALPHA_THRESHOLD
+from .rasterize import rasterize
+
+__all__ = ["Layer", "SplatRenderer", "params_from_gaussians", "render_layers", "render_params"]
+
+
+def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
+                  background=None, near: float = 0.01, far: float = 1e10, eps2d: float = 0.3,
+                  antialiased: bool = False, alpha_threshold: float = ALPHA_THRESHOLD, extent="opacity",
+                  backend: str = "auto", cull: bool = True) -> dict:
+    """Render layers together in ONE rasterizer call. Returns dict(rgb [H,W,3], alpha [H,W,1],
+    depth [H,W,1], instance [H,W,n_actors], actor_ids [ids of the instance channels, in first-seen
+    order, background excluded], culled [actor ids culled by the frustum test], info)."""
+    c = compose_layers(layers, viewmat, K, width, height, near=near, far=far, cull=cull,
+                       sh_backend="torch" if backend == "torch" else "auto")
+    dtype, G = c.dtype, len(c.actor_ids)
+    # means are camera-relative (formed in float64, small now); the rasterizer sees a camera at the origin
+    rgb, alpha, info = rasterize(c.means.to(dtype), c.quats.to(dtype), c.scales.to(dtype), c.opacities.to(dtype),
+                                 c.colors.to(dtype), c.viewmat, K, width, height, background=background, near=near,
+                                 far=far, eps2d=eps2d, antialiased=antialiased, render_depth=True,
+                                 alpha_threshold=alpha_threshold, extent=extent, backend=backend, groups=c.groups,
+                                 n_groups=G)
+    inst = info.get("instance")
+    if inst is None:
+        inst = torch.zeros(height, width, G, dtype=rgb.dtype, device=rgb.device)
+    return {"rgb": rgb, "alpha": alpha, "depth": info["depth"], "instance": inst, "actor_ids": c.actor_ids,
+            "culled": c.culled, "info": info}
 
 
 def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Parameter]:
@@ -33,8 +67,6 @@ def render_params(params: dict[str, torch.Tensor], K, viewmat, width: int, heigh
                   sh_degree: int, render_depth: bool = False, **raster_options):
     """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info).
     ``raster_options`` go to :func:`symdrive_core.splat.rasterize` (antialiased, extent, ...)."""
-    from .rasterize import rasterize
-
     sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
         [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
     quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
@@ -44,28 +76,25 @@ def render_params(params: dict[str, torch.Tensor], K, viewmat, width: int, heigh
 
 
 class SplatRenderer:
-    """Renders one set of Gaussians at arbitrary cameras ([H, W, 3] float32 in [0, 1])."""
+    """Renders one set of stored Gaussians at arbitrary views ([H, W, 3] float32 in [0, 1])."""
 
     def __init__(self, gaussians: Gaussians):
         self.degree = gaussians.sh_degree
         self.params = params_from_gaussians(gaussians, self.degree)
 
+    def _render(self, view: CameraView, render_depth: bool):
+        return render_params(self.params, torch.tensor(view.K, dtype=torch.float32),
+                             torch.tensor(view.world_to_camera, dtype=torch.float32), view.width, view.height,
+                             self.degree, render_depth=render_depth)
+
     @torch.no_grad()
-    def __call__(self, K, world_to_camera, width: int, height: int) -> np.ndarray:
-        rgb, _, _ = render_params(self.params, torch.tensor(K, dtype=torch.float32),
-                                  torch.tensor(world_to_camera, dtype=torch.float32), width, height, self.degree)
+    def __call__(self, view: CameraView) -> np.ndarray:
+        rgb, _, _ = self._render(view, False)
         return rgb.clamp(0, 1).numpy()
 
     @torch.no_grad()
-    def depth(self, K, world_to_camera, width: int, height: int, min_alpha: float = 0.5) -> np.ndarray:
+    def depth(self, view: CameraView, min_alpha: float = 0.5) -> np.ndarray:
         """Rendered z-depth [H, W] (float64), 0 where the render is less opaque than ``min_alpha``."""
-        _, alpha, info = render_params(self.params, torch.tensor(K, dtype=torch.float32),
-                                       torch.tensor(world_to_camera, dtype=torch.float32), width, height,
-                                       self.degree, render_depth=True)
+        _, alpha, info = self._render(view, True)
         d = info["depth"][..., 0].double().numpy()
         return np.where(alpha[..., 0].numpy() >= min_alpha, d, 0.0)
-
-    def shifted(self, K, camera_to_world, offset_m: float, width: int, height: int) -> np.ndarray:
-        """The render at the camera moved ``offset_m`` along its own +x (right)."""
-        c2w = conventions.lateral_shift(camera_to_world, offset_m)
-        return self(K, conventions.invert_rigid(c2w), width, height)

@@ -4,10 +4,12 @@ import torch
 from safetensors.numpy import load_file
 
 from symdrive_core.diffusion.cycle import cycle_renders, shifted_views
-from symdrive_core.diffusion.data import PairSet, SplatRenderer, make_pairs
+from symdrive_core.diffusion.data import PairSet, make_pairs
 from symdrive_core.metrics import psnr
 from symdrive_core.optim.reconstruct import ReconstructConfig, load_views
 from symdrive_core.scene import load_manifest
+from symdrive_core.scene.camera import CameraView
+from symdrive_core.splat.render import SplatRenderer
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 CYCLE = ReconstructConfig(iters=80, densify_from=40, densify_every=40, sky_points=0)
@@ -26,7 +28,7 @@ def test_shifted_views_render_the_camera_moved_right(synthetic_package):  # noqa
         assert np.allclose(c2w_s[:3, 3] - c2w[:3, 3], 1.5 * c2w[:3, 0], atol=1e-5)
         assert np.allclose(c2w_s[:3, :3], c2w[:3, :3], atol=1e-6)
         assert s.depth is None and s.frame == v.frame
-        expect = render.shifted(v.K.numpy(), c2w, 1.5, v.width, v.height)
+        expect = render(v.camera.shifted(1.5))
         assert np.array_equal(s.image.numpy(), expect)
 
 
@@ -38,9 +40,8 @@ def test_cycle_renders_are_aligned_with_the_recorded_frames(synthetic_package): 
     assert out.shape == (4, 32, 48, 3) and out.dtype == np.uint8
     render = SplatRenderer(truth)
     for k, i in enumerate(frames):
-        cf = m.cameras[0].frames[i]
-        recorded = render(cf.K, cf.world_to_camera, 48, 32)
-        shifted = render.shifted(cf.K, cf.camera_to_world, 1.0, 48, 32)
+        view = CameraView.of_frame(m.cameras[0], i)
+        recorded, shifted = render(view), render(view.shifted(1.0))
         cycled = out[k] / 255.0
         # the cycle render is the recorded view, degraded: closer to it than the view 1 m away,
         # yet not the recorded image itself

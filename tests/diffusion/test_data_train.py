@@ -5,11 +5,13 @@ import pytest
 import torch
 from safetensors.numpy import load_file, save_file
 
-from symdrive_core.diffusion.data import PairSet, SplatRenderer, make_pairs
+from symdrive_core.diffusion.data import PairSet, make_pairs
 from symdrive_core.diffusion.models import load_builtin
 from symdrive_core.diffusion.train import TrainConfig, train_restorer
 from symdrive_core.errors import InputError
 from symdrive_core.scene import load_manifest
+from symdrive_core.scene.camera import CameraView
+from symdrive_core.splat.render import SplatRenderer
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 
@@ -22,10 +24,9 @@ def test_make_pairs_renders_the_symmetric_cameras(synthetic_package, tmp_path): 
     data = load_file(str(out))
     assert data["left"].shape == (4, 32, 48, 3) and data["left"].dtype == np.uint8
     assert data["offset"].tolist() == [0.5, 1.0, 0.5, 1.0] and data["frame"].tolist() == [0, 0, 3, 3]
-    cf = manifest.cameras[0].frames[3]
+    view = CameraView.of_frame(manifest.cameras[0], 3)
     render = SplatRenderer(truth)
-    expect_left = render.shifted(cf.K, cf.camera_to_world, -1.0, 48, 32)
-    expect_right = render.shifted(cf.K, cf.camera_to_world, 1.0, 48, 32)
+    expect_left, expect_right = render(view.shifted(-1.0)), render(view.shifted(1.0))
     assert np.abs(data["left"][3] / 255.0 - expect_left).max() <= 0.5 / 255 + 1e-6
     assert np.abs(data["right"][3] / 255.0 - expect_right).max() <= 0.5 / 255 + 1e-6
     assert not np.array_equal(data["left"][3], data["right"][3])

@@ -138,7 +138,7 @@ def test_chain_gives_a_guided_restorer_the_warp_and_its_mask():
     c = LateralChain(restorer, DepthOffsetRenderer(), np.full((4, 6, 3), 0.5, np.float32),
                      CameraView(np.eye(4), np.eye(3), 6, 4), SamplerConfig(steps=1, n_start=0), SeenWarper(2), 0)
     c.by_method(0.5, "geo_single_view")
-    raw = OffsetRenderer()(None, conventions.invert_rigid(conventions.lateral_shift(np.eye(4), 0.5)), 6, 4)
+    raw = OffsetRenderer()(CameraView(np.eye(4), np.eye(3), 6, 4).shifted(0.5))
     expect_warp = torch.from_numpy(raw + 0.25).permute(2, 0, 1) * 2 - 1
     assert torch.allclose(seen[0][0, :3], expect_warp)
     assert seen[0][0, 3, :, :2].eq(1).all() and seen[0][0, 3, :, 2:].eq(-1).all()

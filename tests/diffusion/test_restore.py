@@ -12,9 +12,9 @@ class OffsetRenderer:
     """A stand-in renderer whose image encodes the camera's lateral offset in its pixel value
     (the recorded camera sits at the origin looking down +z, so the offset is its x position)."""
 
-    def __call__(self, K, world_to_camera, width, height):
-        offset = float(conventions.invert_rigid(world_to_camera)[0, 3])
-        return np.full((height, width, 3), 0.5 + offset / 10.0, np.float32)
+    def __call__(self, view):
+        offset = float(view.camera_to_world[0, 3])
+        return np.full((view.height, view.width, 3), 0.5 + offset / 10.0, np.float32)
 
 
 class OffsetWarper:
@@ -34,8 +34,8 @@ class OffsetWarper:
 
 
 class DepthOffsetRenderer(OffsetRenderer):
-    def depth(self, K, w2c, width, height, min_alpha):
-        return np.zeros((height, width))
+    def depth(self, view, min_alpha):
+        return np.zeros((view.height, view.width))
 
 
 class RecordingRestorer:

@@ -15,7 +15,7 @@ import numpy as np
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import SH_C0, Gaussians
-from symdrive_core.insertion.composite import InsertionView
+from symdrive_core.insertion.composite import insertion_view
 from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.io.ply import write_splats
 from symdrive_core.scene.camera import CameraView
@@ -42,7 +42,7 @@ def relight_region(image: np.ndarray, region: np.ndarray) -> np.ndarray:
     return np.where(region[..., None], image * GAIN + OFFSET, image).astype(np.float32)
 
 
-def box_shadow(view: InsertionView, pose, wlh, sun) -> np.ndarray:
+def box_shadow(view, pose, wlh, sun) -> np.ndarray:
     """Bool [H, W]: the pixel's ground point (z = 0) cannot see the sun past the box."""
     from symdrive_core.insertion.shadow import ground_hits
 
@@ -71,7 +71,7 @@ def write_package(root: Path, sun=None) -> tuple[Path, Gaussians]:
     c2ws = [look_at_c2w((0.8 * i, 0.0, 1.6), (0.8 * i + 10.0, 0.0, 0.8)) for i in range(FRAMES)]
     pose = synthetic.car_pose(x=14.0, y=-1.2, yaw=0.4)
     cf = c2ws[HELD]
-    view = InsertionView(CameraView(conventions.invert_rigid(cf), K, W, H), GaussianTensors.from_gaussians(bg),
+    view = insertion_view(CameraView(conventions.invert_rigid(cf), K, W, H), GaussianTensors.from_gaussians(bg),
                          studio, pose)
     truth, alpha = view.render_numpy(relit(studio))
     invisible = Gaussians(studio.means, studio.quats, studio.log_scales, np.full(len(studio), -30.0, np.float32),

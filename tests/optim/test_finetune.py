@@ -3,7 +3,7 @@
 import numpy as np
 
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.insertion.composite import InsertionView
+from symdrive_core.insertion.composite import insertion_view
 from symdrive_core.insertion.shadow import dilate
 from symdrive_core.metrics import psnr
 from symdrive_core.optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
@@ -28,10 +28,10 @@ def _setup():
     eyes = [(0.0, -2.0, 1.6), (1.0, 2.5, 1.8), (-1.0, 0.5, 2.5), (2.0, -4.0, 1.5)]
     samples = []
     for eye in eyes:
-        view = InsertionView(synthetic.camera(eye=eye), bg, studio, pose)
+        view = insertion_view(synthetic.camera(eye=eye), bg, studio, pose)
         target, car_alpha = view.render_numpy(truth)
         samples.append(FinetuneSample(view, target, dilate(car_alpha > 0.01, 2).astype(np.float32)))
-    held = InsertionView(synthetic.camera(eye=(0.5, 1.0, 2.0)), bg, studio, pose)
+    held = insertion_view(synthetic.camera(eye=(0.5, 1.0, 2.0)), bg, studio, pose)
     return studio, truth, samples, held
 
 

@@ -8,8 +8,9 @@ import numpy as np
 import torch
 
 from symdrive_core.gaussians import Gaussians
+from symdrive_core.rotations import matrix_to_quat
 from symdrive_core.splat import GaussianTensors, Layer, rasterize, render_layers
-from symdrive_core.splat.compose import quat_multiply, rotmat_to_quat
+from symdrive_core.splat.compose import rotate_quats
 from symdrive_core.splat.projection import quat_to_rotmat
 
 from .scenes import K_from_fov, look_at
@@ -45,7 +46,7 @@ def test_actor_equals_manual_transform_with_local_sh():
     out = render_layers([Layer(bg, None, None, 0), Layer(car, R, T, 7)], V, K, W, H)
     # manual: world means, composed quaternions, colours from SH in the car's frame
     mw = car.means @ R.T + T
-    qw = quat_multiply(rotmat_to_quat(R), car.quats)
+    qw = rotate_quats(R, car.quats)
     cam = -(V[:3, :3].T @ V[:3, 3])
     from symdrive_core.splat.sh import sh_to_color
     col_car = sh_to_color(3, car.sh, (mw - cam) @ R)  # R^T (mu_w - c) as row vectors
@@ -120,11 +121,16 @@ def test_far_from_origin_matches_origin():
     torch.testing.assert_close(a["rgb"], b["rgb"], atol=1e-4, rtol=0)
 
 
-def test_quaternion_helpers():
+def test_rotate_quats_composes_rotations_and_passes_gradients():
+    """q_R (x) q for a batch of unnormalised quaternions, against the rotation matrices, with gradients."""
     R = _yaw(0.9) @ torch.tensor([[1, 0, 0], [0, 0, -1], [0, 1, 0.0]], dtype=torch.float64)
-    q = rotmat_to_quat(R)
-    torch.testing.assert_close(quat_to_rotmat(q[None])[0], R, atol=1e-12, rtol=0)
-    q2 = torch.tensor([0.3, -0.2, 0.5, 0.7], dtype=torch.float64)
-    q2 = q2 / q2.norm()
-    torch.testing.assert_close(quat_to_rotmat(quat_multiply(q, q2)[None])[0], R @ quat_to_rotmat(q2[None])[0],
+    torch.testing.assert_close(quat_to_rotmat(torch.as_tensor(matrix_to_quat(R.numpy()))[None])[0], R,
                                atol=1e-12, rtol=0)
+    q2 = torch.tensor([[0.3, -0.2, 0.5, 0.7], [1.0, 0.0, 0.0, 0.0], [-0.1, 0.9, 0.2, -0.4]], dtype=torch.float64,
+                      requires_grad=True)
+    q = rotate_quats(R, q2)
+    unit = q2.detach() / q2.detach().norm(dim=1, keepdim=True)
+    torch.testing.assert_close(quat_to_rotmat(q.detach() / q.detach().norm(dim=1, keepdim=True)),
+                               R @ quat_to_rotmat(unit), atol=1e-12, rtol=0)
+    torch.testing.assert_close(q.norm(dim=1), q2.detach().norm(dim=1), atol=1e-12, rtol=0)  # a rotation of R^4
+    assert torch.autograd.gradcheck(lambda x: rotate_quats(R, x), (q2,))
