@@ -30,9 +30,10 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     from symdrive_core.diffusion.models import load_restorer
-    from symdrive_core.insertion.evaluate import InsertionConfig, evaluate_insertion
+    from symdrive_core.insertion.evaluate import evaluate_insertion
     from symdrive_core.insertion.features import load_extractor
     from symdrive_core.insertion.harmonizer import restorer_harmonizer
+    from symdrive_core.insertion.insert import InsertionConfig
     from symdrive_core.io.atomic import write_text_atomic
     from symdrive_core.io.ply import read_splats
     from symdrive_core.optim.finetune import FinetuneConfig

@@ -59,8 +59,9 @@ def _insert(args) -> int:
 
 
 def _insert_eval(args) -> int:
-    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..insertion.evaluate import evaluate_insertion
     from ..insertion.features import load_extractor
+    from ..insertion.insert import InsertionConfig
     from ..io.ply import read_splats
     from ..optim.finetune import FinetuneConfig
     from ..scene import load_manifest

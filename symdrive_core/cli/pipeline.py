@@ -107,9 +107,9 @@ def _batch(args) -> int:
 
 
 def _accuracy_time(args) -> int:
-    from ..pipeline.accuracy_time import format_table, run_settings, write_outputs
+    from ..bench.accuracy_time import format_table, run_settings, write_outputs
+    from ..bench.knobs import WHY_DEFAULTS, package_settings
     from ..pipeline.demo import DEMO_PACKAGE
-    from ..pipeline.knobs import WHY_DEFAULTS, package_settings
     from ..scene import load_manifest
 
     manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)

@@ -1,4 +1,4 @@
-"""Vehicle insertion: assets, placement, shadow regions, baselines, fine-tune inputs, evaluation.
+"""Vehicle insertion: assets, placement, the insertion itself (``insert``), shadows, baselines, evaluation.
 
 Light to import: submodules pull in torch only where they render or optimise.
 """

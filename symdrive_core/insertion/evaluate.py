@@ -12,83 +12,26 @@ reconstruction's own error.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from ..gaussians import Gaussians
 from ..io.images import read_image, read_mask
 from ..io.ply import write_splats
-from ..metrics import bbox_crop, psnr, ssim
-from ..optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
-from ..scene import Manifest, Pose
-from ..scene.camera import CameraView
+from ..metrics import psnr, ssim
+from ..optim.finetune import finetune_colors
+from ..scene import Manifest
 from ..scene.ground_truth import split_frames
-from ..splat.frozen_view import FrozenView
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
-from .cast_shadow import CastShadow, vehicle_shadow
-from .composite import insertion_view
+from .cast_shadow import vehicle_shadow
 from .features import crop_frechet, vehicle_crop
 from .harmonizer import Harmonizer, restorer_harmonizer
+from .insert import InsertionConfig, finetune_sample, insert_frame
 from .placements import HeldOut, camera_view, held_out_placements, training_views
-from .shadow import dilate, harmonization_region, shadow_region
 
 METHODS = ("naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow")
-
-
-@dataclass
-class InsertionConfig:
-    train_views: int = 6
-    crop_margin: int = 6  # pixels around the harmonized region kept for the fine-tune
-    loss_ring_px: int = 2  # the fine-tune looks at the vehicle plus this ring (keeps opacity honest)
-    shadow_dilate_px: int = 3
-    finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
-    assets_out: Path | None = None  # write each fine-tuned asset here as a splat PLY
-
-
-@dataclass
-class InsertedFrame:
-    image: np.ndarray  # the insertion as the scene calls for it: ``plain`` plus its cast shadow under a sun
-    plain: np.ndarray  # the naive render [H, W, 3]
-    vehicle_alpha: np.ndarray  # [H, W]
-    region: np.ndarray  # [H, W] bool: vehicle ∪ shadow region (what harmonization may change)
-    view: FrozenView
-    pose: Pose  # the vehicle's
-    shadow: CastShadow | None = None  # None: no sun, or shadows off
-
-
-def insert_frame(manifest: Manifest, background, vehicle: Gaussians, pose, wlh, camera: CameraView,
-                 shadow_px: int = 3) -> InsertedFrame:
-    """Render one insertion (with the shadow it casts where the scene has a sun) and the region
-    harmonization may change."""
-    view = insertion_view(camera, background, vehicle, pose)
-    rgb, alpha = view.render_numpy(vehicle)
-    eff = manifest.effects
-    region, cast = None, None
-    if eff.shadows and eff.sun_direction is not None:
-        region = shadow_region(pose, wlh, eff.sun_direction, camera.camera_to_world, camera.K, camera.width,
-                               camera.height, dilate_px=shadow_px)
-        cast = vehicle_shadow(view, vehicle, pose, wlh, eff.sun_direction, eff.shade)
-    image = rgb if cast is None else cast.apply(rgb, alpha)
-    return InsertedFrame(image, rgb, alpha, harmonization_region(alpha, region), view, pose, cast)
-
-
-def finetune_sample(frame: InsertedFrame, target: np.ndarray, background, vehicle: Gaussians,
-                    cfg: InsertionConfig) -> FinetuneSample:
-    """The harmonized frame's window around the region, projected once for the fine-tune. The
-    loss looks at the vehicle and a thin ring of background, minus the ring's shadowed pixels
-    (the fine-tune renders no shadow, and must not grow the car to imitate one)."""
-    rows, cols = bbox_crop(frame.region, cfg.crop_margin)
-    view = insertion_view(frame.view.camera.crop(rows, cols), background, vehicle, frame.pose)
-    on_car = frame.vehicle_alpha > 0.01
-    mask = dilate(on_car, cfg.loss_ring_px)
-    if frame.shadow is not None:
-        mask &= on_car | (frame.shadow.occlusion <= 0.01)
-    mask = mask[rows, cols].astype(np.float32)
-    return FinetuneSample(view, np.ascontiguousarray(target[rows, cols]), mask)
 
 
 def truth(manifest: Manifest, placement: HeldOut) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ from ..io.ply import read_splats
 from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
 from ..scene.camera import CameraView
 from .assets import actor_gaussians
-from .evaluate import insert_frame
+from .insert import insert_frame
 
 
 def insert_actor(manifest: Manifest, actor_id: str, out, *, background=None, flip: bool = False,

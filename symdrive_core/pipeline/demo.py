@@ -110,7 +110,7 @@ def render_trajectory(manifest, background, vehicle, wlh, out_dir: Path, progres
     (with its cast shadow where the scene has a sun)."""
     from tqdm import tqdm
 
-    from ..insertion.evaluate import insert_frame
+    from ..insertion.insert import insert_frame
     from ..io.images import write_image
     from ..scene.camera import CameraView
 
@@ -169,8 +169,7 @@ def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool,
     placements = held_out_placements(manifest)
     finetuned = sorted((out / "insertion_assets").glob("*.ply"))
     if placements and finetuned:
-        from ..insertion.composite import render_insertion
-        from ..insertion.evaluate import insert_frame
+        from ..insertion.insert import insert_frame, render_insertion
 
         p = placements[0]
         bg_t = GaussianTensors.from_gaussians(background)

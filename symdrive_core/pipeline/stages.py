@@ -284,7 +284,7 @@ def harmonize_stage(ctx) -> StageResult:
 @stage("finetune")
 def finetune_stage(ctx) -> StageResult:
     """Colour/opacity-only fine-tune of each inserted vehicle on its harmonized frames."""
-    from ..insertion.evaluate import InsertionConfig, finetune_sample, insert_frame
+    from ..insertion.insert import InsertionConfig, finetune_sample, insert_frame
     from ..insertion.placements import camera_view
     from ..io.images import read_image
     from ..io.ply import write_splats
@@ -322,7 +322,8 @@ def finetune_stage(ctx) -> StageResult:
 @stage("evaluate")
 def evaluate_stage(ctx) -> StageResult:
     """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
-    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..insertion.evaluate import evaluate_insertion
+    from ..insertion.insert import InsertionConfig
     from ..optim.evaluate import evaluate_heldout
     from ..optim.finetune import FinetuneConfig
     from ..scene.ground_truth import split_frames

@@ -27,6 +27,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 import symdrive_core
 
 ROOT = Path(symdrive_core.__file__).parent
@@ -184,3 +186,27 @@ def test_the_library_does_not_import_the_demo_world():
     bad = sorted(f"{m} imports {t}" for m, targets in EVERY.items() if not (m == world or m.startswith(world + "."))
                  for t in targets if t == world or t.startswith(world + "."))
     assert bad == [], "symdrive_core.world builds the demo package only:\n" + "\n".join(bad)
+
+
+def _inside(module: str, package: str) -> bool:
+    return module == package or module.startswith(package + ".")
+
+
+def test_the_pipeline_does_not_import_the_benchmarks():
+    bad = sorted(f"{m} imports {t}" for m, targets in EVERY.items() if _inside(m, "symdrive_core.pipeline")
+                 for t in targets if _inside(t, "symdrive_core.bench"))
+    assert bad == [], "symdrive_core.bench measures the pipeline; the pipeline must not depend on it:\n" + "\n".join(bad)
+
+
+APPLICATIONS = ("symdrive_core.insertion", "symdrive_core.diffusion", "symdrive_core.pipeline", "symdrive_core.sim",
+                "symdrive_core.bench", "symdrive_core.traffic", "symdrive_core.importers")
+
+
+@pytest.mark.parametrize("package, above", [
+    ("symdrive_core.splat", APPLICATIONS + ("symdrive_core.optim",)),  # the renderer sits under all that renders
+    ("symdrive_core.optim", APPLICATIONS),  # fitting and fine-tuning take views, not insertion's helpers
+])
+def test_lower_layers_do_not_reach_up(package, above):
+    bad = sorted(f"{m} imports {t}" for m, targets in EVERY.items() if _inside(m, package)
+                 for t in targets if any(_inside(t, a) for a in above))
+    assert bad == [], "\n".join(bad)

@@ -15,7 +15,7 @@ import numpy as np
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import SH_C0, Gaussians
-from symdrive_core.insertion.composite import insertion_view
+from symdrive_core.insertion.insert import insertion_view
 from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.io.ply import write_splats
 from symdrive_core.scene.camera import CameraView

@@ -1,6 +1,7 @@
 import numpy as np
 
-from symdrive_core.insertion.evaluate import InsertionConfig, evaluate_insertion
+from symdrive_core.insertion.evaluate import evaluate_insertion
+from symdrive_core.insertion.insert import InsertionConfig
 from symdrive_core.insertion.placements import held_out_placements, training_views
 from symdrive_core.optim.finetune import FinetuneConfig
 from symdrive_core.scene import load_manifest
@@ -38,7 +39,7 @@ def test_without_a_harmonizer_only_baselines_are_measured(tmp_path):
 
 def test_cast_shadow_matches_the_boxs_true_shadow(tmp_path):
     from symdrive_core.insertion.assets import load_vehicle_asset
-    from symdrive_core.insertion.evaluate import insert_frame
+    from symdrive_core.insertion.insert import insert_frame
     from symdrive_core.io.images import read_image, read_mask
     from symdrive_core.metrics import psnr
     from symdrive_core.splat.tensors import GaussianTensors

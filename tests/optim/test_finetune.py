@@ -3,7 +3,7 @@
 import numpy as np
 
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.insertion.composite import insertion_view
+from symdrive_core.insertion.insert import insertion_view
 from symdrive_core.insertion.shadow import dilate
 from symdrive_core.metrics import psnr
 from symdrive_core.optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors

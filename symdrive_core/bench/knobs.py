@@ -16,10 +16,10 @@ import numpy as np
 import torch
 
 from ..diffusion.harmonize import CROP_MARGIN
+from ..pipeline.stages import StageOptions
 from ..scene.ground_truth import with_placements
 from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
-from .stages import StageOptions
 
 DEFAULTS = StageOptions()
 
@@ -159,8 +159,9 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
 def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Colour/opacity fine-tune iterations, scored as masked PSNR of held-out placements."""
 
-    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..insertion.evaluate import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
+    from ..insertion.insert import InsertionConfig
     from ..optim.finetune import FinetuneConfig
 
     harmonize = restorer_harmonizer(restorer, steps=DEFAULTS.harmonize_steps, start_fraction=DEFAULTS.harmonize_start,
@@ -196,8 +197,9 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
     region the sampler sees, scored as masked PSNR of the harmonized frame against the car truly in
     the scene; seconds per harmonized frame."""
 
-    from ..insertion.evaluate import InsertionConfig, evaluate_insertion
+    from ..insertion.evaluate import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
+    from ..insertion.insert import InsertionConfig
     from ..optim.finetune import FinetuneConfig
 
     scoped = with_placements(manifest, budget.placements)
@@ -230,7 +232,8 @@ def shadow_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     from dataclasses import replace
 
     from ..insertion.assets import load_vehicle_asset
-    from ..insertion.evaluate import insert_frame, scores, truth
+    from ..insertion.evaluate import scores, truth
+    from ..insertion.insert import insert_frame
     from ..insertion.placements import held_out_placements
     from ..splat.tensors import GaussianTensors
 

@@ -4,12 +4,12 @@ import json
 
 import pytest
 
+from symdrive_core.bench.accuracy_time import Setting, format_table, run_settings, write_outputs
+from symdrive_core.bench.knobs import Budget, lane_iou, renderer_settings, shadow_settings, spread
 from symdrive_core.cli import main
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import read_splats
-from symdrive_core.pipeline.accuracy_time import Setting, format_table, run_settings, write_outputs
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
-from symdrive_core.pipeline.knobs import Budget, lane_iou, renderer_settings, shadow_settings, spread
 from symdrive_core.scene import load_manifest
 
 
