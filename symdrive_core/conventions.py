@@ -16,6 +16,8 @@ numpy only: Blender's Python imports this module too.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 UNITS = "metres"
@@ -122,6 +124,45 @@ def blender_intrinsics(
     cx = width / 2.0 - shift_x * view_fac / pixel_aspect_x
     cy = height / 2.0 + shift_y * view_fac / pixel_aspect_y
     return intrinsics(fx, fy, cx, cy)
+
+
+SENSOR_WIDTH_MM = 36.0  # Blender's default sensor, used where a camera is built from K
+
+
+@dataclass(frozen=True)
+class BlenderLens:
+    lens_mm: float
+    sensor_width_mm: float
+    sensor_fit: str
+    shift_x: float
+    shift_y: float
+    pixel_aspect_x: float
+    pixel_aspect_y: float
+
+
+def lens_from_intrinsics(K, width: int, height: int, sensor_width_mm: float = SENSOR_WIDTH_MM) -> BlenderLens:
+    """Blender camera settings that give ``K`` (the inverse of :func:`blender_intrinsics`).
+
+    Blender has one resolution per scene and pixel aspect values of at least 1, so unequal fx and
+    fy become a pixel aspect and the sensor is fitted horizontally.
+    """
+    K = np.asarray(K, dtype=np.float64)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if fx <= 0 or fy <= 0:
+        raise ValueError(f"focal lengths must be positive, got fx={fx}, fy={fy}")
+    if abs(K[0, 1]) > 1e-9 * fx:
+        raise ValueError(f"skewed intrinsics (K[0][1] = {K[0, 1]}) have no Blender equivalent")
+    pax, pay = (1.0, fx / fy) if fx >= fy else (fy / fx, 1.0)
+    view = width * pax  # horizontal sensor fit, in aspect-corrected pixels
+    return BlenderLens(
+        lens_mm=float(fx * sensor_width_mm / width),
+        sensor_width_mm=float(sensor_width_mm),
+        sensor_fit="HORIZONTAL",
+        shift_x=float((width / 2.0 - cx) * pax / view),
+        shift_y=float((cy - height / 2.0) * pay / view),
+        pixel_aspect_x=float(pax),
+        pixel_aspect_y=float(pay),
+    )
 
 
 def scale_intrinsics(K: np.ndarray, sx: float, sy: float | None = None) -> np.ndarray:

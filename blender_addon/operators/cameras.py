@@ -29,7 +29,7 @@ def _build_camera(context, cam, bg: np.ndarray, width: int, height: int) -> bpy.
     obj = bpy.data.objects.new(cam.name, data)
     context.collection.objects.link(obj)
     lenses = [
-        camera_math.lens_from_intrinsics(
+        conventions.lens_from_intrinsics(
             cf.K * [[width / cam.width], [height / cam.height], [1]], width, height
         )
         for cf in cam.frames

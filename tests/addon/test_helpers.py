@@ -94,7 +94,7 @@ def test_fcd_rejects_other_xml(tmp_path):
 def test_blender_lens_reproduces_k(fx, ratio, cx, cy):
     width, height = 640, 480
     K = conventions.intrinsics(fx, fx * ratio, cx, cy)
-    lens = camera_math.lens_from_intrinsics(K, width, height)
+    lens = conventions.lens_from_intrinsics(K, width, height)
     assert min(lens.pixel_aspect_x, lens.pixel_aspect_y) == 1.0
     back = conventions.blender_intrinsics(
         width,
@@ -113,7 +113,7 @@ def test_blender_lens_reproduces_k(fx, ratio, cx, cy):
 
 def test_skew_and_bad_offsets_are_refused():
     with pytest.raises(ValueError, match="skew"):
-        camera_math.lens_from_intrinsics([[500, 3, 320], [0, 500, 240], [0, 0, 1]], 640, 480)
+        conventions.lens_from_intrinsics([[500, 3, 320], [0, 500, 240], [0, 0, 1]], 640, 480)
     assert camera_math.parse_offsets(" -1.5, 1.5 ;3") == [-1.5, 1.5, 3.0]
     with pytest.raises(ValueError, match="'left'"):
         camera_math.parse_offsets("1, left")

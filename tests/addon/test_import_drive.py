@@ -81,9 +81,7 @@ def _check(bpy, K):
         scene.frame_set(scene.frame_start + i)
         got = conventions.blender_camera_to_opencv(np.array(cam.matrix_world))
         np.testing.assert_allclose(got, c2w, atol=1e-5)
-    from blender_addon import camera_math
-
-    lens = camera_math.lens_from_intrinsics(K, W, H)
+    lens = conventions.lens_from_intrinsics(K, W, H)
     assert cam.data.lens == pytest.approx(lens.lens_mm, rel=1e-5)
     assert cam.data.shift_x == pytest.approx(lens.shift_x, abs=1e-6)
     assert cam.data.shift_y == pytest.approx(lens.shift_y, abs=1e-6)
