@@ -41,3 +41,20 @@ def test_the_scan_sees_a_threshold_spelt_as_a_division():
     assert _value(ast.parse("1.0 / 255.0", mode="eval").body) == constants.ALPHA_THRESHOLD
     assert _value(ast.parse("0.99", mode="eval").body) == constants.ALPHA_MAX
     assert _value(ast.parse("x / 255", mode="eval").body) is None
+
+
+def test_sh_constants_are_written_only_by_the_gaussians_module():
+    """``gaussians.py`` owns the SH basis constants; the numba kernels and the float64 oracle keep
+    inline copies on purpose (plain scalars for the kernels, an independent check for the oracle)."""
+    from symdrive_core import gaussians
+
+    values = {abs(v) for v in (gaussians.SH_C0, gaussians.SH_C1, *gaussians.SH_C2, *gaussians.SH_C3)}
+    own = {Path(gaussians.__file__), CORE / "splat" / "proj_kernels.py", CORE / "splat" / "oracle.py"}
+    found = []
+    for path in sorted(CORE.rglob("*.py")):
+        if path in own:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, float) and abs(node.value) in values:
+                found.append(f"{path.relative_to(CORE)}:{node.lineno} {node.value!r}")
+    assert not found, "import these from symdrive_core.gaussians: " + ", ".join(found)
