@@ -14,10 +14,12 @@ stopped are skipped, and the tile ends when every pixel has stopped. A row is on
 over the tile's 16 pixels (selects instead of ``if``, unsigned indices so numba emits no
 negative-index wraparound, the state in one buffer at constant offsets so LLVM needs no aliasing
 checks, and ``exp_neg`` instead of libm's scalar ``exp``), which LLVM turns into a few vector
-instructions per row. Pixels outside the box would have been skipped by the rule above, so the
-decisions are those of a pixel-outer loop over all Gaussians of the tile; sums differ from that
-order only by rounding. Each Gaussian is packed once per frame into one float64 record (geometry,
-sigma limit, box half widths, group, colour), read per intersection in chunks.
+instructions per row; in the forward, a Gaussian whose box spans at most half a tile row (``HALF``
+pixels) takes only the ``HALF`` pixels that hold it, one vector instead of two. Pixels outside the
+box would have been skipped by the rule above, so the decisions are those of a pixel-outer loop over
+all Gaussians of the tile; sums differ from that order only by rounding. Each Gaussian is packed
+once per frame into one float64 record (geometry, sigma limit, box half widths, group, colour), read
+per intersection in chunks.
 
 Arithmetic is float64 inside the kernels whatever the storage dtype, and forward and backward
 evaluate alpha with the same expression, so they take the same decisions. The backward pass runs
@@ -41,6 +43,7 @@ from .constants import TILE_SIZE as TILE
 announce_compiles()
 
 NPX = TILE * TILE
+HALF = TILE // 2  # a narrow Gaussian's rows are evaluated over HALF pixels (one vector)
 # per-pixel state of a tile, slots of NPX values: forward (see rasterize_fwd) and backward (rasterize_bwd)
 F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
@@ -287,6 +290,41 @@ def _copy_records(rec, ids, start, k0, k1, loc):
             loc[k, f] = rec[g, f]
 
 
+@njit(cache=True, inline="always")
+def _fwd_row(st, p0, xw, width, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c2, c3):
+    """The forward's update of ``width`` pixels of a tile row, state slots from ``p0``, image columns
+    from ``xw``: branch free with unsigned indices, one fixed-width vector loop (``width`` is a
+    constant at each call). Returns how many of the pixels stopped and how many kept the Gaussian."""
+    o_done = uint64(F_DONE * NPX)
+    o_last = uint64(F_LAST * NPX)
+    o_w = uint64(F_W * NPX)
+    o_acc = uint64(F_ACC * NPX)
+    stops = 0
+    kept = 0
+    for i in range(width):
+        p = uint64(p0 + i)
+        dx = mx - (xw + i + PIXEL_CENTER_OFFSET)
+        sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+        alpha = min(ALPHA_MAX, o * exp_neg(sigma))
+        Tp = st[p]  # F_T / B_T: slot 0
+        next_T = Tp * (1.0 - alpha)
+        hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+        stop = hit & (next_T <= T_STOP)
+        keep = hit & (next_T > T_STOP)
+        wv = alpha * Tp if keep else 0.0
+        st[o_w + p] = wv
+        st[p] = next_T if keep else Tp
+        st[o_last + p] = kk if keep else st[o_last + p]
+        st[o_done + p] = 1.0 if stop else st[o_done + p]
+        st[o_acc + p] += c0 * wv
+        st[o_acc + uint64(NPX) + p] += c1 * wv
+        st[o_acc + uint64(2 * NPX) + p] += c2 * wv
+        st[o_acc + uint64(3 * NPX) + p] += c3 * wv
+        stops += stop
+        kept += keep
+    return stops, kept
+
+
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last):
@@ -306,8 +344,6 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         n = offsets[t + 1] - start
         # per-pixel state in one buffer at constant offsets from the pixel, so that the row loop needs
         # no aliasing checks: T, done (0/1), last index + 1, weight alpha T, then the colour sums
-        o_done = uint64(F_DONE * NPX)
-        o_last = uint64(F_LAST * NPX)
         o_w = uint64(F_W * NPX)
         o_acc = uint64(F_ACC * NPX)
         st = np.zeros((F_ACC + max(C, FUSED_CHANNELS)) * NPX)
@@ -348,43 +384,27 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             c2 = col[2]
             c3 = col[3]
             kk = float(k + 1)
+            # a box at most HALF pixels wide takes one vector per row: the HALF pixels from column ws
+            narrow = px1 - px0 <= HALF
+            ws = min(px0 - x0, TILE - HALF) if narrow else 0
             for py in range(py0, py1):
                 r = py - y0
                 if row_live[r] == 0:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
                 base = r * TILE
-                stops = 0
-                kept = 0
-                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
-                for i in range(TILE):
-                    p = uint64(base + i)
-                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
-                    sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
-                    alpha = min(ALPHA_MAX, o * exp_neg(sigma))
-                    Tp = st[p]  # F_T / B_T: slot 0
-                    next_T = Tp * (1.0 - alpha)
-                    hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
-                    stop = hit & (next_T <= T_STOP)
-                    keep = hit & (next_T > T_STOP)
-                    wv = alpha * Tp if keep else 0.0
-                    st[o_w + p] = wv
-                    st[p] = next_T if keep else Tp
-                    st[o_last + p] = kk if keep else st[o_last + p]
-                    st[o_done + p] = 1.0 if stop else st[o_done + p]
-                    st[o_acc + p] += c0 * wv
-                    st[o_acc + uint64(NPX) + p] += c1 * wv
-                    st[o_acc + uint64(2 * NPX) + p] += c2 * wv
-                    st[o_acc + uint64(3 * NPX) + p] += c3 * wv
-                    stops += stop
-                    kept += keep
+                if narrow:
+                    stops, kept = _fwd_row(st, base + ws, x0 + ws, HALF, mx, dy, a, b, c, o, lk, threshold, kk,
+                                           c0, c1, c2, c3)
+                else:
+                    stops, kept = _fwd_row(st, base, x0, TILE, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c2, c3)
                 row_live[r] -= stops
                 live -= stops
                 if kept == 0:
                     continue
                 for ch in range(FUSED_CHANNELS, C):
                     cv = col[ch]
-                    for i in range(TILE):
+                    for i in range(ws, ws + (HALF if narrow else TILE)):
                         p = uint64(base + i)
                         st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
                 if grp >= 0:
