@@ -189,7 +189,7 @@ def _radix_order(codes, n_bits):
 
 
 @njit(parallel=True, cache=True)
-def bin_tiles(order, rects, tiles_x, tiles_y):
+def bin_tiles(order, rects, tiles_x, tiles_y, with_rows=True):
     """Per-tile lists of Gaussians in ``order`` (front to back) and each Gaussian's list positions.
 
     ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`). Returns
@@ -199,18 +199,20 @@ def bin_tiles(order, rects, tiles_x, tiles_y):
     parallel in the order of one serial pass over the lists.
     ``order`` is cut into ``BIN_CHUNKS`` pieces counted and written in parallel; within a tile the
     pieces follow each other in order, so the lists are those of one pass in ``order``.
+    ``with_rows`` False (a frame that needs no gradients) leaves ``row_start`` and ``rows`` empty.
     """
     n_tiles = tiles_x * tiles_y
     m = order.shape[0]
     counts = np.zeros((BIN_CHUNKS, n_tiles), dtype=np.int64)
-    per_gaussian = np.zeros(m + 1, dtype=np.int64)
+    per_gaussian = np.zeros(m + 1 if with_rows else 0, dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
             for ty in range(y0, y1):
                 for tx in range(x0, x1):
                     counts[ch, ty * tiles_x + tx] += 1
-            per_gaussian[order[j] + 1] = max(x1 - x0, 0) * max(y1 - y0, 0)
+            if with_rows:
+                per_gaussian[order[j] + 1] = max(x1 - x0, 0) * max(y1 - y0, 0)
     offsets = np.zeros(n_tiles + 1, dtype=np.int64)
     for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
         at = offsets[t]
@@ -221,18 +223,19 @@ def bin_tiles(order, rects, tiles_x, tiles_y):
         offsets[t + 1] = at
     row_start = np.cumsum(per_gaussian)
     ids = np.empty(offsets[n_tiles], dtype=np.int32)
-    rows = np.empty(offsets[n_tiles], dtype=np.int64)
+    rows = np.empty(offsets[n_tiles] if with_rows else 0, dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         cursor = counts[ch]
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             i = order[j]
-            at = row_start[i]
+            at = row_start[i] if with_rows else 0
             for ty in range(rects[j, 2], rects[j, 3]):
                 for tx in range(rects[j, 0], rects[j, 1]):
                     t = ty * tiles_x + tx
                     ids[cursor[t]] = i
-                    rows[at] = cursor[t]
-                    at += 1
+                    if with_rows:
+                        rows[at] = cursor[t]
+                        at += 1
                     cursor[t] += 1
     return offsets, ids, row_start, rows
 

@@ -32,7 +32,7 @@ class TileBins:
     offsets: np.ndarray  # [n_tiles + 1] int64
     ids: np.ndarray  # [n_isect] int32, indices into the visible Gaussians, front to back per tile
     row_start: np.ndarray  # [m + 1] int64: Gaussian g's list positions are rows[row_start[g]:row_start[g+1]]
-    rows: np.ndarray  # [n_isect] int64, increasing per Gaussian
+    rows: np.ndarray  # [n_isect] int64, increasing per Gaussian (both empty when binned with with_rows=False)
     tiles_x: int
     tiles_y: int
     tile_size: int = TILE_SIZE
@@ -43,8 +43,12 @@ class TileBins:
 
 
 def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
-                  tile_size: int = TILE_SIZE) -> TileBins:
-    """Tile lists for (visible) Gaussians, each list sorted by depth (ties: lower index first)."""
+                  tile_size: int = TILE_SIZE, with_rows: bool = True) -> TileBins:
+    """Tile lists for (visible) Gaussians, each list sorted by depth (ties: lower index first).
+
+    ``with_rows=False`` skips each Gaussian's list positions (``row_start``, ``rows``: only the
+    backward pass reads them), for a frame rendered without gradients.
+    """
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     m2d = _np(means2d)
@@ -55,7 +59,7 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
     order = kernels.depth_order(_np(depths))
     with _KernelScope(chunk=0, items=m2d.shape[0]):
         rects = kernels.tile_rects(m2d, rad, order, tile_size, tiles_x, tiles_y)
-        offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+        offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y, with_rows)
     return TileBins(offsets, ids, row_start, rows, tiles_x, tiles_y, tile_size)
 
 
@@ -121,6 +125,8 @@ class RasterizePixels(torch.autograd.Function):
             kernels.rasterize_bwd(*args, out_color, out_T, out_inst, out_last, gc, ga, gi,
                                   r[:, 0:2], r[:, 2:5], r[:, 5], r[:, 6:])
         bins = ctx.bins
+        if bins.row_start.shape[0] != m + 1:
+            raise RuntimeError("the tile lists were binned with with_rows=False: no backward pass")
         g_m2d = np.empty((m, 2), np_dtype)
         g_conic = np.empty((m, 3), np_dtype)
         g_opac = np.empty(m, np_dtype)
@@ -311,7 +317,8 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         if render_depth:
             feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
         feats = feats.to(dtype)
-        bins = bin_gaussians(m2d, torch.from_numpy(radii_v), depths_v, width, height)
+        grad = torch.is_grad_enabled() and any(t.requires_grad for t in (m2d, conics, opac, feats))
+        bins = bin_gaussians(m2d, torch.from_numpy(radii_v), depths_v, width, height, with_rows=grad)
         n_isect = bins.n_isect
         out, alpha, inst = RasterizePixels.apply(m2d, conics, opac, feats, grp, G, bins, width, height,
                                                  alpha_threshold)
