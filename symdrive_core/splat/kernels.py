@@ -33,7 +33,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange, uint64
+from llvmlite import ir
+from numba import njit, prange, types, uint64
+from numba.extending import intrinsic
 
 from ..conventions import PIXEL_CENTER_OFFSET
 from .compile_notice import announce_compiles
@@ -55,7 +57,6 @@ BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (r
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
 LN2_LO = 1.90821492927058770002e-10
 INV_LN2 = 1.44269504088896338700e+00
-POW2_NEG = 2.0 ** -np.arange(1075.0)  # 2^-k, k = 0 .. 1074 (subnormals included)
 
 
 @njit(cache=True, inline="always")
@@ -66,6 +67,23 @@ def sigma_limit(o, threshold):
     return math.log(o / threshold) * (1.0 + 1e-9) + 1e-9
 
 
+@intrinsic
+def _bits_to_float64(typingctx, bits):
+    """The float64 whose IEEE bit pattern is the int64 ``bits``."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.int64), codegen
+
+
+@njit(cache=True, inline="always")
+def pow2_neg(k):
+    """2^-k for k = 0 .. 1074 (subnormals included), exactly, from its bit pattern: a few integer
+    operations that vectorise, where a table read would be a gather."""
+    normal = (1023 - min(k, 1022)) << 52  # biased exponent 1023 - k
+    subnormal = 1 << max(min(1074 - k, 62), 0)  # k > 1022: the single mantissa bit 1074 - k
+    return _bits_to_float64(normal if k <= 1022 else subnormal)
+
+
 @njit(cache=True, fastmath={"contract"})
 def exp_neg(s):
     """exp(-s) within 2 ulp of ``math.exp`` (0 < exp(-s) <= 1, s clamped to [0, 744]).
@@ -73,7 +91,7 @@ def exp_neg(s):
     Arithmetic, a floor and a table read only, so a pixel loop that calls it vectorises (libm's
     ``exp`` is a scalar call that keeps the loop scalar). Range reduction s = k ln 2 - r, |r| <= ln2/2,
     then Taylor to degree 13 (truncation below 2e-17) by fused multiply-adds (``contract``, in this
-    function only: the callers' decisions keep plain rounding).
+    function only: the callers' decisions keep plain rounding), times 2^-k built from its bits.
     """
     x = min(0.0, max(-s, -744.0))
     kf = math.floor(x * INV_LN2 + 0.5)
@@ -92,7 +110,7 @@ def exp_neg(s):
     q = q * r + 0.5
     q = q * r + 1.0
     q = q * r + 1.0
-    return q * POW2_NEG[int(-kf)]
+    return q * pow2_neg(int(-kf))
 
 
 @njit(cache=True, inline="always")

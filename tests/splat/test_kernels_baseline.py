@@ -179,3 +179,9 @@ def test_vector_exp_is_within_two_ulp_of_libm():
     got = np.array([kernels.exp_neg(v) for v in s])
     want = np.exp(-s)
     assert np.all(np.abs(got - want) <= 2 * np.spacing(want))
+
+
+def test_power_of_two_scale_is_exact():
+    """exp_neg's 2^-k from bits equals 2.0 ** -k for every k it can take, subnormals included."""
+    got = np.array([kernels.pow2_neg(k) for k in range(1075)])
+    np.testing.assert_array_equal(got, 2.0 ** -np.arange(1075.0))
