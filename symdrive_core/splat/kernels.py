@@ -21,6 +21,10 @@ all Gaussians of the tile; sums differ from that order only by rounding. Each Ga
 once per frame into one float64 record (geometry, sigma limit, box half widths, group, colour), read
 per intersection in chunks.
 
+A tile list may leave out a Gaussian where it would be skipped at every pixel of the tile
+(:func:`ellipse_rects`: tiles outside its box, or that its ellipse, slightly widened, does not reach):
+the same decisions with fewer tile-Gaussian pairs.
+
 Arithmetic is float64 inside the kernels whatever the storage dtype, and forward and backward
 evaluate alpha with the same expression, so they take the same decisions. The backward pass runs
 front to back again with per-pixel running sums, gets the "behind" sums from the forward's final
@@ -54,6 +58,10 @@ LOAD_CHUNK = 32  # records a forward tile reads at a time
 BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
 RADIX_BITS = 11  # bits per pass of the depth sort
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
+CULL_MARGIN = 4e-6  # relative and absolute widening of the ellipse that decides a Gaussian's tiles
+CULL_COND = 1e6  # ellipses with a c / det above this (needles) keep every tile of their rectangle
+CULL_SIDE = 8  # rectangles up to this many tiles a side are cut to their ellipse (a 64-bit mask)
+EVERY_TILE = np.uint64(0xFFFFFFFFFFFFFFFF)
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
 LN2_LO = 1.90821492927058770002e-10
 INV_LN2 = 1.44269504088896338700e+00
@@ -166,6 +174,135 @@ def tile_rects(means2d, radii, order, tile_size, tiles_x, tiles_y):
     return rects
 
 
+@njit(cache=True, inline="always")
+def _box_tiles(m, half, size, t0, t1):
+    """Tiles of [t0, t1) holding a pixel of :func:`pixel_span`'s box ``m +- half`` (image ``size``
+    pixels): those where the kernels' span is not empty."""
+    if not (half < np.inf and abs(m) < np.inf):
+        return t0, t1
+    first = math.ceil(m - half - PIXEL_CENTER_OFFSET)  # the box's pixels [first, stop), before clipping
+    stop = math.floor(m + half - PIXEL_CENTER_OFFSET) + 1.0
+    if not (first < stop and first < size):
+        return t0, t0
+    u0 = max(float(t0), math.floor(first / TILE))
+    u1 = min(float(t1), math.ceil(stop / TILE))
+    if not u0 < u1:
+        return t0, t0
+    return int(u0), int(u1)
+
+
+@njit(cache=True, inline="always")
+def _band_span(mx, my, b, det, a2lw, inv_a, t, yc0, yc1):
+    """Pixel-centre x interval [lo, hi] where the ellipse ``a dx^2/2 + b dx dy + c dy^2/2 <= lw`` has a
+    point with pixel-centre y in [yc0, yc1] (lo > hi when there is none); ``a2lw = 2 a lw``,
+    ``inv_a = 1 / a``, ``t = b hx / c`` (its extreme x points are (hx, -t) and (-hx, t) in (dx, dy)).
+
+    The right end of the ellipse's chord at dy, ``(sqrt(2 a lw - det dy^2) - b dy) / a``, is largest at
+    dy = -t and falls off on either side (the left end mirrors it at t), so the band's extremes lie at
+    those dy clamped into the band.
+    """
+    dlo = my - yc1  # dy = mean - pixel centre over the band
+    dhi = my - yc0
+    dr = min(max(-t, dlo), dhi)
+    dl = min(max(t, dlo), dhi)
+    disc_r = a2lw - det * dr * dr
+    disc_l = a2lw - det * dl * dl
+    if disc_r < 0.0 or disc_l < 0.0:
+        return np.inf, -np.inf
+    return mx - (math.sqrt(disc_r) - b * dr) * inv_a, mx + (math.sqrt(disc_l) + b * dl) * inv_a  # x = mx - dx
+
+
+@njit(cache=True, inline="always")
+def _tile_mask(mx, my, a, b, c, lim, x0, x1, y0, y1):
+    """Bit (ty - y0) * CULL_SIDE + (tx - x0) per tile of the rectangle that the ellipse reaches.
+
+    The ellipse is the kernels' ``sigma <= lim`` widened by ``CULL_MARGIN`` (relative and absolute, in
+    sigma and in the x extent): a pixel outside it has a sigma well above ``lim`` whatever the
+    rounding, so the kernels would skip it. Every bit is set for ellipses that are unbounded or
+    needle-like (``a c > CULL_COND det``, where the rounding of sigma grows) and for non-finite values.
+    """
+    det = a * c - b * b
+    if not (lim >= 0.0 and lim < np.inf and a > 0.0 and c > 0.0 and det > 0.0 and a < np.inf and c < np.inf
+            and abs(mx) < np.inf and abs(my) < np.inf and a * c <= CULL_COND * det):
+        return EVERY_TILE
+    lw = lim * (1.0 + CULL_MARGIN) + CULL_MARGIN
+    hx = math.sqrt(2.0 * lw * c / det)
+    pad = CULL_MARGIN * hx + CULL_MARGIN  # covers the rounding of the chord's ends
+    a2lw = 2.0 * a * lw
+    inv_a = 1.0 / a
+    t = b * hx / c
+    mask = np.uint64(0)
+    for ty in range(y0, y1):
+        lo, hi = _band_span(mx, my, b, det, a2lw, inv_a, t, ty * TILE + PIXEL_CENTER_OFFSET,
+                            ty * TILE + TILE - 1 + PIXEL_CENTER_OFFSET)
+        t0 = max(float(x0), math.ceil((lo - pad - (TILE - 1 + PIXEL_CENTER_OFFSET)) / TILE))
+        t1 = min(float(x1), math.floor((hi + pad - PIXEL_CENTER_OFFSET) / TILE) + 1.0)
+        if t0 < t1:  # (false when the band misses the ellipse: lo > hi)
+            row = (np.uint64(1) << np.uint64(int(t1) - x0)) - np.uint64(1)
+            row &= ~((np.uint64(1) << np.uint64(int(t0) - x0)) - np.uint64(1))
+            mask |= row << np.uint64((ty - y0) * CULL_SIDE)
+    return mask
+
+
+@njit(parallel=True, cache=True)
+def ellipse_rects(means2d, radii, conics, opac, order, threshold, width, height, tile_size, tiles_x, tiles_y):
+    """:func:`tile_rects` cut to the tiles where the kernels can use the Gaussian: ``(rects, masks)``
+    in depth order (row j: Gaussian ``order[j]``).
+
+    The rectangle shrinks to the tiles that hold a pixel of the kernels' own box (``pixel_span`` of
+    ``ellipse_half_extent``, the same values: tiles outside it are skipped there at once), and for
+    rectangles of 2 to ``CULL_SIDE`` tiles a side ``masks[j]`` keeps only the tiles that the ellipse
+    reaches (:func:`_tile_mask`; every bit set otherwise). Computed in index order (the inputs read
+    as streams), then gathered into depth order in one random read per Gaussian.
+    """
+    m = means2d.shape[0]
+    snug = np.zeros((m, 4), dtype=np.int32)
+    cut = np.empty(m, dtype=np.uint64)
+    for i in prange(m):
+        cut[i] = EVERY_TILE
+        rx = float(radii[i, 0])
+        ry = float(radii[i, 1])
+        if rx <= 0.0 and ry <= 0.0:
+            continue
+        mx = float(means2d[i, 0])
+        my = float(means2d[i, 1])
+        a = float(conics[i, 0])
+        b = float(conics[i, 1])
+        c = float(conics[i, 2])
+        lim = sigma_limit(float(opac[i]), threshold)
+        hx, hy = ellipse_half_extent(a, b, c, lim)
+        x0, x1 = _box_tiles(mx, hx, width,
+                            int(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x))),
+                            int(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x))))
+        y0, y1 = _box_tiles(my, hy, height,
+                            int(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y))),
+                            int(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y))))
+        if x0 == x1 or y0 == y1:
+            continue
+        snug[i, 0] = x0
+        snug[i, 1] = x1
+        snug[i, 2] = y0
+        snug[i, 3] = y1
+        if x1 - x0 >= 2 and y1 - y0 >= 2 and x1 - x0 <= CULL_SIDE and y1 - y0 <= CULL_SIDE:
+            cut[i] = _tile_mask(mx, my, a, b, c, lim, x0, x1, y0, y1)
+    rects = np.empty((order.shape[0], 4), dtype=np.int32)
+    masks = np.empty(order.shape[0], dtype=np.uint64)
+    for j in prange(order.shape[0]):
+        i = order[j]
+        for f in range(4):
+            rects[j, f] = snug[i, f]
+        masks[j] = cut[i]
+    return rects, masks
+
+
+@njit(cache=True, inline="always")
+def _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+    """Whether Gaussian j's list gets tile (tx, ty) of its rectangle (see :func:`ellipse_rects`)."""
+    if masks.shape[0] == 0 or x1 - x0 > CULL_SIDE or y1 - y0 > CULL_SIDE:
+        return True
+    return (masks[j] >> np.uint64((ty - y0) * CULL_SIDE + tx - x0)) & np.uint64(1) != 0
+
+
 def depth_order(depths: np.ndarray) -> np.ndarray:
     """Indices sorting ``depths`` (float32/float64) ascending, ties by index: ``np.argsort(kind="stable")``.
 
@@ -207,10 +344,11 @@ def _radix_order(codes, n_bits):
 
 
 @njit(parallel=True, cache=True)
-def bin_tiles(order, rects, tiles_x, tiles_y, with_rows=True):
+def bin_tiles(order, rects, tiles_x, tiles_y, masks, with_rows=True):
     """Per-tile lists of Gaussians in ``order`` (front to back) and each Gaussian's list positions.
 
-    ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`). Returns
+    ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`, :func:`ellipse_rects`) and
+    ``masks[j]``, when ``masks`` has rows, the tiles of it that get an entry (:func:`ellipse_rects`). Returns
     ``(offsets[n_tiles+1], ids[n_isect], row_start[m+1], rows[n_isect])``: tile t's list is
     ``ids[offsets[t]:offsets[t+1]]``; Gaussian g's list positions are ``rows[row_start[g]:row_start[g+1]]``,
     increasing (its tiles are visited row by row), so :func:`reduce_rows` sums per Gaussian in
@@ -226,11 +364,14 @@ def bin_tiles(order, rects, tiles_x, tiles_y, with_rows=True):
     for ch in prange(BIN_CHUNKS):
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            total = 0
             for ty in range(y0, y1):
                 for tx in range(x0, x1):
-                    counts[ch, ty * tiles_x + tx] += 1
+                    if _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+                        counts[ch, ty * tiles_x + tx] += 1
+                        total += 1
             if with_rows:
-                per_gaussian[order[j] + 1] = max(x1 - x0, 0) * max(y1 - y0, 0)
+                per_gaussian[order[j] + 1] = total
     offsets = np.zeros(n_tiles + 1, dtype=np.int64)
     for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
         at = offsets[t]
@@ -247,8 +388,11 @@ def bin_tiles(order, rects, tiles_x, tiles_y, with_rows=True):
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             i = order[j]
             at = row_start[i] if with_rows else 0
-            for ty in range(rects[j, 2], rects[j, 3]):
-                for tx in range(rects[j, 0], rects[j, 1]):
+            x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            for ty in range(y0, y1):
+                for tx in range(x0, x1):
+                    if not _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+                        continue
                     t = ty * tiles_x + tx
                     ids[cursor[t]] = i
                     if with_rows:

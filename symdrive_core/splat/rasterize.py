@@ -43,8 +43,13 @@ class TileBins:
 
 
 def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tensor, width: int, height: int,
-                  tile_size: int = TILE_SIZE, with_rows: bool = True) -> TileBins:
+                  tile_size: int = TILE_SIZE, with_rows: bool = True, conics: torch.Tensor | None = None,
+                  opacities: torch.Tensor | None = None, threshold: float = ALPHA_THRESHOLD) -> TileBins:
     """Tile lists for (visible) Gaussians, each list sorted by depth (ties: lower index first).
+
+    Every tile of a Gaussian's rectangle (``radii``), or, given its ``conics`` and ``opacities`` (and
+    the compositing ``threshold``), only the tiles where the compositing kernels can use it
+    (:func:`.kernels.ellipse_rects`): the image is the same, with fewer tile-Gaussian pairs.
 
     ``with_rows=False`` skips each Gaussian's list positions (``row_start``, ``rows``: only the
     backward pass reads them), for a frame rendered without gradients.
@@ -58,8 +63,13 @@ def bin_gaussians(means2d: torch.Tensor, radii: torch.Tensor, depths: torch.Tens
                         np.zeros(0, np.int64), tiles_x, tiles_y, tile_size)
     order = kernels.depth_order(_np(depths))
     with _KernelScope(chunk=0, items=m2d.shape[0]):
-        rects = kernels.tile_rects(m2d, rad, order, tile_size, tiles_x, tiles_y)
-        offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y, with_rows)
+        if conics is None or tile_size != kernels.TILE:
+            rects = kernels.tile_rects(m2d, rad, order, tile_size, tiles_x, tiles_y)
+            masks = np.zeros(0, np.uint64)
+        else:
+            rects, masks = kernels.ellipse_rects(m2d, rad, _np(conics), _np(opacities), order, float(threshold),
+                                                 width, height, tile_size, tiles_x, tiles_y)
+        offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y, masks, with_rows)
     return TileBins(offsets, ids, row_start, rows, tiles_x, tiles_y, tile_size)
 
 
@@ -317,8 +327,12 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         if render_depth:
             feats = torch.cat([feats, depths_v[:, None].to(feats.dtype)], 1)
         feats = feats.to(dtype)
+        # a frame with gradients bins each Gaussian only into the tiles its ellipse reaches: the backward's
+        # work per tile-Gaussian pair (gradient rows, reduction) repays the binning's extra work, which a
+        # forward alone only about breaks even on (measured at 1M Gaussians, 1280x720)
         grad = torch.is_grad_enabled() and any(t.requires_grad for t in (m2d, conics, opac, feats))
-        bins = bin_gaussians(m2d, torch.from_numpy(radii_v), depths_v, width, height, with_rows=grad)
+        cut = {"conics": conics, "opacities": opac, "threshold": alpha_threshold} if grad else {}
+        bins = bin_gaussians(m2d, torch.from_numpy(radii_v), depths_v, width, height, with_rows=grad, **cut)
         n_isect = bins.n_isect
         out, alpha, inst = RasterizePixels.apply(m2d, conics, opac, feats, grp, G, bins, width, height,
                                                  alpha_threshold)

@@ -89,7 +89,8 @@ def test_info_contents():
 
 def test_frame_without_gradients_bins_without_list_positions():
     """A no-grad frame skips the per-Gaussian list positions (only the backward reads them) and
-    renders the same image; a frame with gradients keeps them."""
+    renders the same image; a frame with gradients keeps them (and cuts the lists to the tiles each
+    ellipse reaches: fewer or as many pairs)."""
     s = random_scene(80, 1, 4, dtype=torch.float32)
     with torch.no_grad():
         rgb0, alpha0, info0 = rasterize(*args_of(s))
@@ -97,7 +98,7 @@ def test_frame_without_gradients_bins_without_list_positions():
     rgb1, alpha1, info1 = rasterize(*leaf, *args_of(s)[5:])
     assert info0["bins"].rows.shape[0] == 0 and info0["bins"].row_start.shape[0] == 0
     assert info1["bins"].rows.shape[0] == info1["n_isect"] > 0
-    np.testing.assert_array_equal(info0["bins"].ids, info1["bins"].ids)
+    assert info1["n_isect"] <= info0["n_isect"]
     np.testing.assert_array_equal(rgb0.numpy(), rgb1.detach().numpy())
     np.testing.assert_array_equal(alpha0.numpy(), alpha1.detach().numpy())
     (rgb1.sum() + alpha1.sum()).backward()

@@ -157,7 +157,7 @@ def test_binning_and_reduction_match_the_baseline(dtype):
     tiles_y = (height + 15) // 16
     order = kernels.depth_order(depths.astype(dtype))
     rects = kernels.tile_rects(means.astype(dtype), radii.astype(np.int32), order, kernels.TILE, tiles_x, tiles_y)
-    offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+    offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y, np.zeros(0, np.uint64))
     np.testing.assert_array_equal(offsets, offsets_b)
     np.testing.assert_array_equal(ids, ids_b)
     m, n_isect = means.shape[0], ids.shape[0]
