@@ -55,6 +55,7 @@ F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
+PACK_PIECES = 64  # pieces of the Gaussians packed in parallel
 BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
 RADIX_BITS = 11  # bits per pass of the depth sort
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
@@ -430,19 +431,22 @@ def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
     C = colors.shape[1]
     m = means2d.shape[0]
     rec = np.empty((m, R_COLOR + C))
-    for g in prange(m):
-        rec[g, R_MX] = means2d[g, 0]
-        rec[g, R_MY] = means2d[g, 1]
-        rec[g, R_A] = conics[g, 0]
-        rec[g, R_B] = conics[g, 1]
-        rec[g, R_C] = conics[g, 2]
-        rec[g, R_O] = opac[g]
-        lim = sigma_limit(rec[g, R_O], threshold)
-        rec[g, R_LIM] = lim
-        rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
-        rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
-        for ch in range(C):
-            rec[g, R_COLOR + ch] = colors[g, ch]
+    # in PACK_PIECES contiguous pieces: the kernels' parallel chunk is sized for tiles, and handing
+    # out a few Gaussians at a time would cost more than packing them
+    for piece in prange(PACK_PIECES):
+        for g in range(piece * m // PACK_PIECES, (piece + 1) * m // PACK_PIECES):
+            rec[g, R_MX] = means2d[g, 0]
+            rec[g, R_MY] = means2d[g, 1]
+            rec[g, R_A] = conics[g, 0]
+            rec[g, R_B] = conics[g, 1]
+            rec[g, R_C] = conics[g, 2]
+            rec[g, R_O] = opac[g]
+            lim = sigma_limit(rec[g, R_O], threshold)
+            rec[g, R_LIM] = lim
+            rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
+            rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
+            for ch in range(C):
+                rec[g, R_COLOR + ch] = colors[g, ch]
     return rec
 
 
