@@ -1,7 +1,8 @@
 """Tile-based CPU kernels (numba): binning, forward and backward of 2D Gaussian compositing.
 
-Work is split by 16x16 tiles with ``prange`` (one tile per task, no shared writes). Per pixel,
-Gaussians are composited front to back in depth order:
+Work is split by 16x16 tiles with ``prange`` (one tile per task, no shared writes; taken in
+strips of ``TILE_STRIP`` tile rows, column by column, so that a Gaussian's tiles run close
+together). Per pixel, Gaussians are composited front to back in depth order:
 
     sigma = a dx^2 / 2 + b dx dy + c dy^2 / 2        (dx = mean - pixel centre)
     alpha = min(0.99, o exp(-sigma))                 skipped when sigma < 0 or alpha < threshold
@@ -55,6 +56,7 @@ F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
+TILE_STRIP = 4  # tile rows the kernels walk column by column (see _tile_at)
 PACK_PIECES = 64  # pieces of the Gaussians packed in parallel
 BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
 RADIX_BITS = 16  # bits per pass of the depth sort (2 passes for float32 depths)
@@ -451,6 +453,18 @@ def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
 
 
 @njit(cache=True, inline="always")
+def _tile_at(i, tiles_x, tiles_y):
+    """Tile (index, x, y) taken i-th: strips of ``TILE_STRIP`` tile rows, each column by column, so
+    that the tiles of a Gaussian (and its record, read from memory) come close together."""
+    strip = i // (TILE_STRIP * tiles_x)
+    rows = min(TILE_STRIP, tiles_y - strip * TILE_STRIP)
+    within = i - strip * TILE_STRIP * tiles_x
+    tx = within // rows
+    ty = strip * TILE_STRIP + within - tx * rows
+    return ty * tiles_x + tx, tx, ty
+
+
+@njit(cache=True, inline="always")
 def _copy_records(rec, ids, start, k0, k1, loc):
     """Rows [k0, k1) of the tile's records into ``loc`` (a tight loop keeps many reads in flight)."""
     for k in range(k0, k1):
@@ -502,9 +516,8 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
     rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
-    for t in prange(n_tiles):
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
+    for i_tile in prange(n_tiles):
+        t, tx, ty = _tile_at(i_tile, tiles_x, n_tiles // tiles_x)
         x0 = tx * TILE
         y0 = ty * TILE
         x1 = min(x0 + TILE, width)
@@ -603,9 +616,8 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
     rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
-    for t in prange(n_tiles):
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
+    for i_tile in prange(n_tiles):
+        t, tx, ty = _tile_at(i_tile, tiles_x, n_tiles // tiles_x)
         x0 = tx * TILE
         y0 = ty * TILE
         x1 = min(x0 + TILE, width)

@@ -185,3 +185,10 @@ def test_power_of_two_scale_is_exact():
     """exp_neg's 2^-k from bits equals 2.0 ** -k for every k it can take, subnormals included."""
     got = np.array([kernels.pow2_neg(k) for k in range(1075)])
     np.testing.assert_array_equal(got, 2.0 ** -np.arange(1075.0))
+
+
+@pytest.mark.parametrize("tiles_x,tiles_y", [(80, 45), (5, 3), (1, 1), (7, 9), (3, 4), (1, 6)])
+def test_tile_order_visits_every_tile_once(tiles_x, tiles_y):
+    got = [kernels._tile_at(i, tiles_x, tiles_y) for i in range(tiles_x * tiles_y)]
+    assert sorted(t for t, _, _ in got) == list(range(tiles_x * tiles_y))
+    assert all(t == ty * tiles_x + tx and 0 <= tx < tiles_x and 0 <= ty < tiles_y for t, tx, ty in got)
