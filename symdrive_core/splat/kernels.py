@@ -434,10 +434,11 @@ R_MX, R_MY, R_A, R_B, R_C, R_O, R_HX, R_HY, R_LIM, R_GROUP, R_COLOR = range(11)
 
 
 @njit(cache=True, inline="always")
-def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
+def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec):
     C = colors.shape[1]
     m = means2d.shape[0]
-    rec = np.empty((m, R_COLOR + C))
+    if rec.shape[0] != m or rec.shape[1] != R_COLOR + C:
+        raise ValueError("the record buffer must be [n Gaussians, R_COLOR + channels]")
     # in PACK_PIECES contiguous pieces: the kernels' parallel chunk is sized for tiles, and handing
     # out a few Gaussians at a time would cost more than packing them
     for piece in prange(PACK_PIECES):
@@ -515,10 +516,14 @@ def _fwd_row(st, p0, xw, width, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c
 
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
-                  tile_size, threshold, out_color, out_T, out_inst, out_last):
+                  tile_size, threshold, out_color, out_T, out_inst, out_last, rec):
+    """Forward compositing into out_* (colour sums, final T, instance weights, last list position + 1
+    per pixel). ``rec`` [m, R_COLOR + C] float64 is scratch for the packed records (its contents
+    are overwritten): a buffer the caller keeps between frames spares the fresh pages of a new one.
+    """
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
-    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
+    _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for i_tile in prange(n_tiles):
@@ -610,15 +615,16 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
 @njit(parallel=True, cache=True)
 def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst,
-                  r_m2d, r_conic, r_opac, r_color):
+                  r_m2d, r_conic, r_opac, r_color, rec):
     """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``;
-    views of one [n_isect, 6 + C] array keep each intersection's row in one cache line).
+    views of one [n_isect, 6 + C] array keep each intersection's row in one cache line). ``rec`` is
+    scratch for the packed records, as in :func:`rasterize_fwd`.
 
     The rows must come in zeroed: rows of Gaussians that reach no pixel are not written.
     """
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
-    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
+    _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
     for i_tile in prange(n_tiles):

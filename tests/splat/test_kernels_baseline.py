@@ -61,12 +61,19 @@ def kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, widt
             offsets, ids, width, height, tiles_x, kernels.TILE, THRESHOLD)
 
 
+def records(module, args):
+    """The current kernels' scratch for packed records (filled with garbage: it is only scratch)."""
+    if module is not kernels:
+        return ()
+    return (np.full((args[0].shape[0], kernels.R_COLOR + args[3].shape[1]), np.nan),)
+
+
 def forward(module, args):
     """Colour, T, instance weights and last index of one kernel module's forward."""
     width, height, colors = args[8], args[9], args[3]
     out = (np.zeros((height, width, colors.shape[1]), colors.dtype), np.ones((height, width)),
            np.zeros((height, width, N_GROUPS), colors.dtype), np.zeros((height, width), np.int64))
-    module.rasterize_fwd(*args, *out)
+    module.rasterize_fwd(*args, *out, *records(module, args))
     return out
 
 
@@ -78,7 +85,7 @@ def backward(module, args, fwd_out, seed):
     grads = (rng.normal(size=(height, width, C)).astype(dtype), rng.normal(size=(height, width)).astype(dtype),
              rng.normal(size=(height, width, N_GROUPS)).astype(dtype))
     rows = (np.zeros((m, 2), dtype), np.zeros((m, 3), dtype), np.zeros(m, dtype), np.zeros((m, C), dtype))
-    module.rasterize_bwd(*args, *fwd_out, *grads, *rows)
+    module.rasterize_bwd(*args, *fwd_out, *grads, *rows, *records(module, args))
     return rows
 
 
