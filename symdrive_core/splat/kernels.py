@@ -19,8 +19,8 @@ instructions per row; in the forward, a Gaussian whose box spans at most half a 
 pixels) takes only the ``HALF`` pixels that hold it, one vector instead of two. Pixels outside the
 box would have been skipped by the rule above, so the decisions are those of a pixel-outer loop over
 all Gaussians of the tile; sums differ from that order only by rounding. Each Gaussian is packed
-once per frame into one float64 record (geometry, sigma limit, box half widths, group, colour), read
-per intersection in chunks.
+once per kernel call into one float64 record (geometry, sigma limit, box half widths, group,
+colour; in a scratch buffer the caller keeps), read per intersection in chunks.
 
 A tile list may leave out a Gaussian where it would be skipped at every pixel of the tile
 (:func:`ellipse_rects`: tiles outside its box, or that its ellipse, slightly widened, does not reach):
