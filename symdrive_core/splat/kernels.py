@@ -1,7 +1,8 @@
 """Tile-based CPU kernels (numba): binning, forward and backward of 2D Gaussian compositing.
 
-Work is split by 16x16 tiles with ``prange`` (one tile per task, no shared writes). Per pixel,
-Gaussians are composited front to back in depth order:
+Work is split by 16x16 tiles with ``prange`` (one tile per task, no shared writes; taken in
+strips of ``TILE_STRIP`` tile rows, column by column, so that a Gaussian's tiles run close
+together). Per pixel, Gaussians are composited front to back in depth order:
 
     sigma = a dx^2 / 2 + b dx dy + c dy^2 / 2        (dx = mean - pixel centre)
     alpha = min(0.99, o exp(-sigma))                 skipped when sigma < 0 or alpha < threshold
@@ -14,10 +15,16 @@ stopped are skipped, and the tile ends when every pixel has stopped. A row is on
 over the tile's 16 pixels (selects instead of ``if``, unsigned indices so numba emits no
 negative-index wraparound, the state in one buffer at constant offsets so LLVM needs no aliasing
 checks, and ``exp_neg`` instead of libm's scalar ``exp``), which LLVM turns into a few vector
-instructions per row. Pixels outside the box would have been skipped by the rule above, so the
-decisions are those of a pixel-outer loop over all Gaussians of the tile; sums differ from that
-order only by rounding. Each Gaussian is packed once per frame into one float64 record (geometry,
-sigma limit, box half widths, group, colour), read per intersection in chunks.
+instructions per row; in the forward, a Gaussian whose box spans at most half a tile row (``HALF``
+pixels) takes only the ``HALF`` pixels that hold it, one vector instead of two. Pixels outside the
+box would have been skipped by the rule above, so the decisions are those of a pixel-outer loop over
+all Gaussians of the tile; sums differ from that order only by rounding. Each Gaussian is packed
+once per kernel call into one float64 record (geometry, sigma limit, box half widths, group,
+colour; in a scratch buffer the caller keeps), read per intersection in chunks.
+
+A tile list may leave out a Gaussian where it would be skipped at every pixel of the tile
+(:func:`ellipse_rects`: tiles outside its box, or that its ellipse, slightly widened, does not reach):
+the same decisions with fewer tile-Gaussian pairs.
 
 Arithmetic is float64 inside the kernels whatever the storage dtype, and forward and backward
 evaluate alpha with the same expression, so they take the same decisions. The backward pass runs
@@ -31,7 +38,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange, uint64
+from llvmlite import ir
+from numba import njit, prange, types, uint64
+from numba.extending import intrinsic
 
 from ..conventions import PIXEL_CENTER_OFFSET
 from .compile_notice import announce_compiles
@@ -41,18 +50,24 @@ from .constants import TILE_SIZE as TILE
 announce_compiles()
 
 NPX = TILE * TILE
+HALF = TILE // 2  # a narrow Gaussian's rows are evaluated over HALF pixels (one vector)
 # per-pixel state of a tile, slots of NPX values: forward (see rasterize_fwd) and backward (rasterize_bwd)
 F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
 FUSED_CHANNELS = 4  # colour channels summed inside the forward's row loop (RGB + depth); more take extra passes
 LOAD_CHUNK = 32  # records a forward tile reads at a time
+TILE_STRIP = 4  # tile rows the kernels walk column by column (see _tile_at)
+PACK_PIECES = 64  # pieces of the Gaussians packed in parallel
 BIN_CHUNKS = 32  # pieces of the depth order binned in parallel
-RADIX_BITS = 11  # bits per pass of the depth sort
+RADIX_BITS = 16  # bits per pass of the depth sort (2 passes for float32 depths)
 BOX_MARGIN = 1e-6  # relative and absolute widening of a Gaussian's pixel box (rounding of sigma)
+CULL_MARGIN = 4e-6  # relative and absolute widening of the ellipse that decides a Gaussian's tiles
+CULL_COND = 1e6  # ellipses with a c / det above this (needles) keep every tile of their rectangle
+CULL_SIDE = 8  # rectangles up to this many tiles a side are cut to their ellipse (a 64-bit mask)
+EVERY_TILE = np.uint64(0xFFFFFFFFFFFFFFFF)
 LN2_HI = 6.93147180369123816490e-01  # ln 2 split for an exact k ln 2 (fdlibm's constants)
 LN2_LO = 1.90821492927058770002e-10
 INV_LN2 = 1.44269504088896338700e+00
-POW2_NEG = 2.0 ** -np.arange(1075.0)  # 2^-k, k = 0 .. 1074 (subnormals included)
 
 
 @njit(cache=True, inline="always")
@@ -63,6 +78,23 @@ def sigma_limit(o, threshold):
     return math.log(o / threshold) * (1.0 + 1e-9) + 1e-9
 
 
+@intrinsic
+def _bits_to_float64(typingctx, bits):
+    """The float64 whose IEEE bit pattern is the int64 ``bits``."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.int64), codegen
+
+
+@njit(cache=True, inline="always")
+def pow2_neg(k):
+    """2^-k for k = 0 .. 1074 (subnormals included), exactly, from its bit pattern: a few integer
+    operations that vectorise, where a table read would be a gather."""
+    normal = (1023 - min(k, 1022)) << 52  # biased exponent 1023 - k
+    subnormal = 1 << max(min(1074 - k, 62), 0)  # k > 1022: the single mantissa bit 1074 - k
+    return _bits_to_float64(normal if k <= 1022 else subnormal)
+
+
 @njit(cache=True, fastmath={"contract"})
 def exp_neg(s):
     """exp(-s) within 2 ulp of ``math.exp`` (0 < exp(-s) <= 1, s clamped to [0, 744]).
@@ -70,7 +102,7 @@ def exp_neg(s):
     Arithmetic, a floor and a table read only, so a pixel loop that calls it vectorises (libm's
     ``exp`` is a scalar call that keeps the loop scalar). Range reduction s = k ln 2 - r, |r| <= ln2/2,
     then Taylor to degree 13 (truncation below 2e-17) by fused multiply-adds (``contract``, in this
-    function only: the callers' decisions keep plain rounding).
+    function only: the callers' decisions keep plain rounding), times 2^-k built from its bits.
     """
     x = min(0.0, max(-s, -744.0))
     kf = math.floor(x * INV_LN2 + 0.5)
@@ -89,7 +121,7 @@ def exp_neg(s):
     q = q * r + 0.5
     q = q * r + 1.0
     q = q * r + 1.0
-    return q * POW2_NEG[int(-kf)]
+    return q * pow2_neg(int(-kf))
 
 
 @njit(cache=True, inline="always")
@@ -126,23 +158,157 @@ def tile_rects(means2d, radii, order, tile_size, tiles_x, tiles_y):
     """Tile rectangle [x0, x1) x [y0, y1) (gsplat's floor/ceil rule) of Gaussian ``order[j]`` in row j.
 
     In depth order, so that binning reads the rectangles as a stream instead of one random read per
-    Gaussian and pass; int32, half the bytes of int64.
+    Gaussian and pass; int32, half the bytes of int64. Computed in index order (the inputs read as
+    streams), then gathered: one random read per Gaussian instead of two.
     """
+    n = means2d.shape[0]
+    own = np.empty((n, 4), dtype=np.int32)
+    for i in prange(n):
+        rx = float(radii[i, 0])
+        ry = float(radii[i, 1])
+        mx = float(means2d[i, 0])
+        my = float(means2d[i, 1])
+        empty = rx <= 0.0 and ry <= 0.0
+        own[i, 0] = 0 if empty else np.int32(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x)))
+        own[i, 1] = 0 if empty else np.int32(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x)))
+        own[i, 2] = 0 if empty else np.int32(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y)))
+        own[i, 3] = 0 if empty else np.int32(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y)))
     m = order.shape[0]
-    rects = np.zeros((m, 4), dtype=np.int32)
+    rects = np.empty((m, 4), dtype=np.int32)
     for j in prange(m):
         i = order[j]
+        for f in range(4):
+            rects[j, f] = own[i, f]
+    return rects
+
+
+@njit(cache=True, inline="always")
+def _box_tiles(m, half, size, t0, t1):
+    """Tiles of [t0, t1) holding a pixel of :func:`pixel_span`'s box ``m +- half`` (image ``size``
+    pixels): those where the kernels' span is not empty."""
+    if not (half < np.inf and abs(m) < np.inf):
+        return t0, t1
+    first = math.ceil(m - half - PIXEL_CENTER_OFFSET)  # the box's pixels [first, stop), before clipping
+    stop = math.floor(m + half - PIXEL_CENTER_OFFSET) + 1.0
+    if not (first < stop and first < size):
+        return t0, t0
+    u0 = max(float(t0), math.floor(first / TILE))
+    u1 = min(float(t1), math.ceil(stop / TILE))
+    if not u0 < u1:
+        return t0, t0
+    return int(u0), int(u1)
+
+
+@njit(cache=True, inline="always")
+def _band_span(mx, my, b, det, a2lw, inv_a, t, yc0, yc1):
+    """Pixel-centre x interval [lo, hi] where the ellipse ``a dx^2/2 + b dx dy + c dy^2/2 <= lw`` has a
+    point with pixel-centre y in [yc0, yc1] (lo > hi when there is none); ``a2lw = 2 a lw``,
+    ``inv_a = 1 / a``, ``t = b hx / c`` (its extreme x points are (hx, -t) and (-hx, t) in (dx, dy)).
+
+    The right end of the ellipse's chord at dy, ``(sqrt(2 a lw - det dy^2) - b dy) / a``, is largest at
+    dy = -t and falls off on either side (the left end mirrors it at t), so the band's extremes lie at
+    those dy clamped into the band.
+    """
+    dlo = my - yc1  # dy = mean - pixel centre over the band
+    dhi = my - yc0
+    dr = min(max(-t, dlo), dhi)
+    dl = min(max(t, dlo), dhi)
+    disc_r = a2lw - det * dr * dr
+    disc_l = a2lw - det * dl * dl
+    if disc_r < 0.0 or disc_l < 0.0:
+        return np.inf, -np.inf
+    return mx - (math.sqrt(disc_r) - b * dr) * inv_a, mx + (math.sqrt(disc_l) + b * dl) * inv_a  # x = mx - dx
+
+
+@njit(cache=True, inline="always")
+def _tile_mask(mx, my, a, b, c, lim, x0, x1, y0, y1):
+    """Bit (ty - y0) * CULL_SIDE + (tx - x0) per tile of the rectangle that the ellipse reaches.
+
+    The ellipse is the kernels' ``sigma <= lim`` widened by ``CULL_MARGIN`` (relative and absolute, in
+    sigma and in the x extent): a pixel outside it has a sigma well above ``lim`` whatever the
+    rounding, so the kernels would skip it. Every bit is set for ellipses that are unbounded or
+    needle-like (``a c > CULL_COND det``, where the rounding of sigma grows) and for non-finite values.
+    """
+    det = a * c - b * b
+    if not (lim >= 0.0 and lim < np.inf and a > 0.0 and c > 0.0 and det > 0.0 and a < np.inf and c < np.inf
+            and abs(mx) < np.inf and abs(my) < np.inf and a * c <= CULL_COND * det):
+        return EVERY_TILE
+    lw = lim * (1.0 + CULL_MARGIN) + CULL_MARGIN
+    hx = math.sqrt(2.0 * lw * c / det)
+    pad = CULL_MARGIN * hx + CULL_MARGIN  # covers the rounding of the chord's ends
+    a2lw = 2.0 * a * lw
+    inv_a = 1.0 / a
+    t = b * hx / c
+    mask = np.uint64(0)
+    for ty in range(y0, y1):
+        lo, hi = _band_span(mx, my, b, det, a2lw, inv_a, t, ty * TILE + PIXEL_CENTER_OFFSET,
+                            ty * TILE + TILE - 1 + PIXEL_CENTER_OFFSET)
+        t0 = max(float(x0), math.ceil((lo - pad - (TILE - 1 + PIXEL_CENTER_OFFSET)) / TILE))
+        t1 = min(float(x1), math.floor((hi + pad - PIXEL_CENTER_OFFSET) / TILE) + 1.0)
+        if t0 < t1:  # (false when the band misses the ellipse: lo > hi)
+            row = (np.uint64(1) << np.uint64(int(t1) - x0)) - np.uint64(1)
+            row &= ~((np.uint64(1) << np.uint64(int(t0) - x0)) - np.uint64(1))
+            mask |= row << np.uint64((ty - y0) * CULL_SIDE)
+    return mask
+
+
+@njit(parallel=True, cache=True)
+def ellipse_rects(means2d, radii, conics, opac, order, threshold, width, height, tile_size, tiles_x, tiles_y):
+    """:func:`tile_rects` cut to the tiles where the kernels can use the Gaussian: ``(rects, masks)``
+    in depth order (row j: Gaussian ``order[j]``).
+
+    The rectangle shrinks to the tiles that hold a pixel of the kernels' own box (``pixel_span`` of
+    ``ellipse_half_extent``, the same values: tiles outside it are skipped there at once), and for
+    rectangles of 2 to ``CULL_SIDE`` tiles a side ``masks[j]`` keeps only the tiles that the ellipse
+    reaches (:func:`_tile_mask`; every bit set otherwise). Computed in index order (the inputs read
+    as streams), then gathered into depth order in one random read per Gaussian.
+    """
+    m = means2d.shape[0]
+    snug = np.zeros((m, 4), dtype=np.int32)
+    cut = np.empty(m, dtype=np.uint64)
+    for i in prange(m):
+        cut[i] = EVERY_TILE
         rx = float(radii[i, 0])
         ry = float(radii[i, 1])
         if rx <= 0.0 and ry <= 0.0:
             continue
         mx = float(means2d[i, 0])
         my = float(means2d[i, 1])
-        rects[j, 0] = np.int32(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x)))
-        rects[j, 1] = np.int32(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x)))
-        rects[j, 2] = np.int32(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y)))
-        rects[j, 3] = np.int32(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y)))
-    return rects
+        a = float(conics[i, 0])
+        b = float(conics[i, 1])
+        c = float(conics[i, 2])
+        lim = sigma_limit(float(opac[i]), threshold)
+        hx, hy = ellipse_half_extent(a, b, c, lim)
+        x0, x1 = _box_tiles(mx, hx, width,
+                            int(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x))),
+                            int(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x))))
+        y0, y1 = _box_tiles(my, hy, height,
+                            int(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y))),
+                            int(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y))))
+        if x0 == x1 or y0 == y1:
+            continue
+        snug[i, 0] = x0
+        snug[i, 1] = x1
+        snug[i, 2] = y0
+        snug[i, 3] = y1
+        if x1 - x0 >= 2 and y1 - y0 >= 2 and x1 - x0 <= CULL_SIDE and y1 - y0 <= CULL_SIDE:
+            cut[i] = _tile_mask(mx, my, a, b, c, lim, x0, x1, y0, y1)
+    rects = np.empty((order.shape[0], 4), dtype=np.int32)
+    masks = np.empty(order.shape[0], dtype=np.uint64)
+    for j in prange(order.shape[0]):
+        i = order[j]
+        for f in range(4):
+            rects[j, f] = snug[i, f]
+        masks[j] = cut[i]
+    return rects, masks
+
+
+@njit(cache=True, inline="always")
+def _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+    """Whether Gaussian j's list gets tile (tx, ty) of its rectangle (see :func:`ellipse_rects`)."""
+    if masks.shape[0] == 0 or x1 - x0 > CULL_SIDE or y1 - y0 > CULL_SIDE:
+        return True
+    return (masks[j] >> np.uint64((ty - y0) * CULL_SIDE + tx - x0)) & np.uint64(1) != 0
 
 
 def depth_order(depths: np.ndarray) -> np.ndarray:
@@ -186,28 +352,34 @@ def _radix_order(codes, n_bits):
 
 
 @njit(parallel=True, cache=True)
-def bin_tiles(order, rects, tiles_x, tiles_y):
+def bin_tiles(order, rects, tiles_x, tiles_y, masks, with_rows=True):
     """Per-tile lists of Gaussians in ``order`` (front to back) and each Gaussian's list positions.
 
-    ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`). Returns
+    ``rects[j]`` is Gaussian ``order[j]``'s tile rectangle (:func:`tile_rects`, :func:`ellipse_rects`) and
+    ``masks[j]``, when ``masks`` has rows, the tiles of it that get an entry (:func:`ellipse_rects`). Returns
     ``(offsets[n_tiles+1], ids[n_isect], row_start[m+1], rows[n_isect])``: tile t's list is
     ``ids[offsets[t]:offsets[t+1]]``; Gaussian g's list positions are ``rows[row_start[g]:row_start[g+1]]``,
     increasing (its tiles are visited row by row), so :func:`reduce_rows` sums per Gaussian in
     parallel in the order of one serial pass over the lists.
     ``order`` is cut into ``BIN_CHUNKS`` pieces counted and written in parallel; within a tile the
     pieces follow each other in order, so the lists are those of one pass in ``order``.
+    ``with_rows`` False (a frame that needs no gradients) leaves ``row_start`` and ``rows`` empty.
     """
     n_tiles = tiles_x * tiles_y
     m = order.shape[0]
     counts = np.zeros((BIN_CHUNKS, n_tiles), dtype=np.int64)
-    per_gaussian = np.zeros(m + 1, dtype=np.int64)
+    per_gaussian = np.zeros(m + 1 if with_rows else 0, dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            total = 0
             for ty in range(y0, y1):
                 for tx in range(x0, x1):
-                    counts[ch, ty * tiles_x + tx] += 1
-            per_gaussian[order[j] + 1] = max(x1 - x0, 0) * max(y1 - y0, 0)
+                    if _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+                        counts[ch, ty * tiles_x + tx] += 1
+                        total += 1
+            if with_rows:
+                per_gaussian[order[j] + 1] = total
     offsets = np.zeros(n_tiles + 1, dtype=np.int64)
     for t in range(n_tiles):  # counts become each piece's first slot in the tile's list
         at = offsets[t]
@@ -218,18 +390,22 @@ def bin_tiles(order, rects, tiles_x, tiles_y):
         offsets[t + 1] = at
     row_start = np.cumsum(per_gaussian)
     ids = np.empty(offsets[n_tiles], dtype=np.int32)
-    rows = np.empty(offsets[n_tiles], dtype=np.int64)
+    rows = np.empty(offsets[n_tiles] if with_rows else 0, dtype=np.int64)
     for ch in prange(BIN_CHUNKS):
         cursor = counts[ch]
         for j in range(ch * m // BIN_CHUNKS, (ch + 1) * m // BIN_CHUNKS):
             i = order[j]
-            at = row_start[i]
-            for ty in range(rects[j, 2], rects[j, 3]):
-                for tx in range(rects[j, 0], rects[j, 1]):
+            at = row_start[i] if with_rows else 0
+            x0, x1, y0, y1 = rects[j, 0], rects[j, 1], rects[j, 2], rects[j, 3]
+            for ty in range(y0, y1):
+                for tx in range(x0, x1):
+                    if not _tile_kept(masks, j, tx, ty, x0, x1, y0, y1):
+                        continue
                     t = ty * tiles_x + tx
                     ids[cursor[t]] = i
-                    rows[at] = cursor[t]
-                    at += 1
+                    if with_rows:
+                        rows[at] = cursor[t]
+                        at += 1
                     cursor[t] += 1
     return offsets, ids, row_start, rows
 
@@ -258,24 +434,40 @@ R_MX, R_MY, R_A, R_B, R_C, R_O, R_HX, R_HY, R_LIM, R_GROUP, R_COLOR = range(11)
 
 
 @njit(cache=True, inline="always")
-def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold):
+def _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec):
     C = colors.shape[1]
     m = means2d.shape[0]
-    rec = np.empty((m, R_COLOR + C))
-    for g in prange(m):
-        rec[g, R_MX] = means2d[g, 0]
-        rec[g, R_MY] = means2d[g, 1]
-        rec[g, R_A] = conics[g, 0]
-        rec[g, R_B] = conics[g, 1]
-        rec[g, R_C] = conics[g, 2]
-        rec[g, R_O] = opac[g]
-        lim = sigma_limit(rec[g, R_O], threshold)
-        rec[g, R_LIM] = lim
-        rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
-        rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
-        for ch in range(C):
-            rec[g, R_COLOR + ch] = colors[g, ch]
+    if rec.shape[0] != m or rec.shape[1] != R_COLOR + C:
+        raise ValueError("the record buffer must be [n Gaussians, R_COLOR + channels]")
+    # in PACK_PIECES contiguous pieces: the kernels' parallel chunk is sized for tiles, and handing
+    # out a few Gaussians at a time would cost more than packing them
+    for piece in prange(PACK_PIECES):
+        for g in range(piece * m // PACK_PIECES, (piece + 1) * m // PACK_PIECES):
+            rec[g, R_MX] = means2d[g, 0]
+            rec[g, R_MY] = means2d[g, 1]
+            rec[g, R_A] = conics[g, 0]
+            rec[g, R_B] = conics[g, 1]
+            rec[g, R_C] = conics[g, 2]
+            rec[g, R_O] = opac[g]
+            lim = sigma_limit(rec[g, R_O], threshold)
+            rec[g, R_LIM] = lim
+            rec[g, R_HX], rec[g, R_HY] = ellipse_half_extent(rec[g, R_A], rec[g, R_B], rec[g, R_C], lim)
+            rec[g, R_GROUP] = groups[g] if n_groups > 0 else -1
+            for ch in range(C):
+                rec[g, R_COLOR + ch] = colors[g, ch]
     return rec
+
+
+@njit(cache=True, inline="always")
+def _tile_at(i, tiles_x, tiles_y):
+    """Tile (index, x, y) taken i-th: strips of ``TILE_STRIP`` tile rows, each column by column, so
+    that the tiles of a Gaussian (and its record, read from memory) come close together."""
+    strip = i // (TILE_STRIP * tiles_x)
+    rows = min(TILE_STRIP, tiles_y - strip * TILE_STRIP)
+    within = i - strip * TILE_STRIP * tiles_x
+    tx = within // rows
+    ty = strip * TILE_STRIP + within - tx * rows
+    return ty * tiles_x + tx, tx, ty
 
 
 @njit(cache=True, inline="always")
@@ -287,17 +479,55 @@ def _copy_records(rec, ids, start, k0, k1, loc):
             loc[k, f] = rec[g, f]
 
 
+@njit(cache=True, inline="always")
+def _fwd_row(st, p0, xw, width, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c2, c3):
+    """The forward's update of ``width`` pixels of a tile row, state slots from ``p0``, image columns
+    from ``xw``: branch free with unsigned indices, one fixed-width vector loop (``width`` is a
+    constant at each call). Returns how many of the pixels stopped and how many kept the Gaussian."""
+    o_done = uint64(F_DONE * NPX)
+    o_last = uint64(F_LAST * NPX)
+    o_w = uint64(F_W * NPX)
+    o_acc = uint64(F_ACC * NPX)
+    stops = 0
+    kept = 0
+    for i in range(width):
+        p = uint64(p0 + i)
+        dx = mx - (xw + i + PIXEL_CENTER_OFFSET)
+        sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+        alpha = min(ALPHA_MAX, o * exp_neg(sigma))
+        Tp = st[p]  # F_T / B_T: slot 0
+        next_T = Tp * (1.0 - alpha)
+        hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+        stop = hit & (next_T <= T_STOP)
+        keep = hit & (next_T > T_STOP)
+        wv = alpha * Tp if keep else 0.0
+        st[o_w + p] = wv
+        st[p] = next_T if keep else Tp
+        st[o_last + p] = kk if keep else st[o_last + p]
+        st[o_done + p] = 1.0 if stop else st[o_done + p]
+        st[o_acc + p] += c0 * wv
+        st[o_acc + uint64(NPX) + p] += c1 * wv
+        st[o_acc + uint64(2 * NPX) + p] += c2 * wv
+        st[o_acc + uint64(3 * NPX) + p] += c3 * wv
+        stops += stop
+        kept += keep
+    return stops, kept
+
+
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
-                  tile_size, threshold, out_color, out_T, out_inst, out_last):
+                  tile_size, threshold, out_color, out_T, out_inst, out_last, rec):
+    """Forward compositing into out_* (colour sums, final T, instance weights, last list position + 1
+    per pixel). ``rec`` [m, R_COLOR + C] float64 is scratch for the packed records (its contents
+    are overwritten): a buffer the caller keeps between frames spares the fresh pages of a new one.
+    """
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
-    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
+    _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
-    for t in prange(n_tiles):
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
+    for i_tile in prange(n_tiles):
+        t, tx, ty = _tile_at(i_tile, tiles_x, n_tiles // tiles_x)
         x0 = tx * TILE
         y0 = ty * TILE
         x1 = min(x0 + TILE, width)
@@ -306,8 +536,6 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         n = offsets[t + 1] - start
         # per-pixel state in one buffer at constant offsets from the pixel, so that the row loop needs
         # no aliasing checks: T, done (0/1), last index + 1, weight alpha T, then the colour sums
-        o_done = uint64(F_DONE * NPX)
-        o_last = uint64(F_LAST * NPX)
         o_w = uint64(F_W * NPX)
         o_acc = uint64(F_ACC * NPX)
         st = np.zeros((F_ACC + max(C, FUSED_CHANNELS)) * NPX)
@@ -348,43 +576,27 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             c2 = col[2]
             c3 = col[3]
             kk = float(k + 1)
+            # a box at most HALF pixels wide takes one vector per row: the HALF pixels from column ws
+            narrow = px1 - px0 <= HALF
+            ws = min(px0 - x0, TILE - HALF) if narrow else 0
             for py in range(py0, py1):
                 r = py - y0
                 if row_live[r] == 0:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
                 base = r * TILE
-                stops = 0
-                kept = 0
-                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
-                for i in range(TILE):
-                    p = uint64(base + i)
-                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
-                    sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
-                    alpha = min(ALPHA_MAX, o * exp_neg(sigma))
-                    Tp = st[p]  # F_T / B_T: slot 0
-                    next_T = Tp * (1.0 - alpha)
-                    hit = (st[o_done + p] == 0.0) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
-                    stop = hit & (next_T <= T_STOP)
-                    keep = hit & (next_T > T_STOP)
-                    wv = alpha * Tp if keep else 0.0
-                    st[o_w + p] = wv
-                    st[p] = next_T if keep else Tp
-                    st[o_last + p] = kk if keep else st[o_last + p]
-                    st[o_done + p] = 1.0 if stop else st[o_done + p]
-                    st[o_acc + p] += c0 * wv
-                    st[o_acc + uint64(NPX) + p] += c1 * wv
-                    st[o_acc + uint64(2 * NPX) + p] += c2 * wv
-                    st[o_acc + uint64(3 * NPX) + p] += c3 * wv
-                    stops += stop
-                    kept += keep
+                if narrow:
+                    stops, kept = _fwd_row(st, base + ws, x0 + ws, HALF, mx, dy, a, b, c, o, lk, threshold, kk,
+                                           c0, c1, c2, c3)
+                else:
+                    stops, kept = _fwd_row(st, base, x0, TILE, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c2, c3)
                 row_live[r] -= stops
                 live -= stops
                 if kept == 0:
                     continue
                 for ch in range(FUSED_CHANNELS, C):
                     cv = col[ch]
-                    for i in range(TILE):
+                    for i in range(ws, ws + (HALF if narrow else TILE)):
                         p = uint64(base + i)
                         st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
                 if grp >= 0:
@@ -403,20 +615,20 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
 @njit(parallel=True, cache=True)
 def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, g_color, g_alpha, g_inst,
-                  r_m2d, r_conic, r_opac, r_color):
+                  r_m2d, r_conic, r_opac, r_color, rec):
     """Gradient rows per intersection: r_* [n_isect, ...] (summed per Gaussian by ``reduce_rows``;
-    views of one [n_isect, 6 + C] array keep each intersection's row in one cache line).
+    views of one [n_isect, 6 + C] array keep each intersection's row in one cache line). ``rec`` is
+    scratch for the packed records, as in :func:`rasterize_fwd`.
 
     The rows must come in zeroed: rows of Gaussians that reach no pixel are not written.
     """
     if tile_size != TILE:
         raise ValueError("the compositing kernels need tiles of TILE pixels")
-    rec = _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold)
+    _pack_records(means2d, conics, opac, colors, groups, n_groups, threshold, rec)
     n_tiles = offsets.shape[0] - 1
     C = colors.shape[1]
-    for t in prange(n_tiles):
-        ty = t // tiles_x
-        tx = t - ty * tiles_x
+    for i_tile in prange(n_tiles):
+        t, tx, ty = _tile_at(i_tile, tiles_x, n_tiles // tiles_x)
         x0 = tx * TILE
         y0 = ty * TILE
         x1 = min(x0 + TILE, width)

@@ -85,3 +85,21 @@ def test_info_contents():
     rgb.sum().backward()
     assert info["means2d"].grad.shape == (60, 2) and float(info["means2d"].grad.abs().sum()) > 0
     assert means2d_leaf.grad is not None
+
+
+def test_frame_without_gradients_bins_without_list_positions():
+    """A no-grad frame skips the per-Gaussian list positions (only the backward reads them) and
+    renders the same image; a frame with gradients keeps them (and cuts the lists to the tiles each
+    ellipse reaches: fewer or as many pairs)."""
+    s = random_scene(80, 1, 4, dtype=torch.float32)
+    with torch.no_grad():
+        rgb0, alpha0, info0 = rasterize(*args_of(s))
+    leaf = [t.detach().requires_grad_(True) for t in args_of(s)[:5]]
+    rgb1, alpha1, info1 = rasterize(*leaf, *args_of(s)[5:])
+    assert info0["bins"].rows.shape[0] == 0 and info0["bins"].row_start.shape[0] == 0
+    assert info1["bins"].rows.shape[0] == info1["n_isect"] > 0
+    assert info1["n_isect"] <= info0["n_isect"]
+    np.testing.assert_array_equal(rgb0.numpy(), rgb1.detach().numpy())
+    np.testing.assert_array_equal(alpha0.numpy(), alpha1.detach().numpy())
+    (rgb1.sum() + alpha1.sum()).backward()
+    assert all(t.grad is not None for t in leaf)

@@ -61,12 +61,19 @@ def kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, widt
             offsets, ids, width, height, tiles_x, kernels.TILE, THRESHOLD)
 
 
+def records(module, args):
+    """The current kernels' scratch for packed records (filled with garbage: it is only scratch)."""
+    if module is not kernels:
+        return ()
+    return (np.full((args[0].shape[0], kernels.R_COLOR + args[3].shape[1]), np.nan),)
+
+
 def forward(module, args):
     """Colour, T, instance weights and last index of one kernel module's forward."""
     width, height, colors = args[8], args[9], args[3]
     out = (np.zeros((height, width, colors.shape[1]), colors.dtype), np.ones((height, width)),
            np.zeros((height, width, N_GROUPS), colors.dtype), np.zeros((height, width), np.int64))
-    module.rasterize_fwd(*args, *out)
+    module.rasterize_fwd(*args, *out, *records(module, args))
     return out
 
 
@@ -78,7 +85,7 @@ def backward(module, args, fwd_out, seed):
     grads = (rng.normal(size=(height, width, C)).astype(dtype), rng.normal(size=(height, width)).astype(dtype),
              rng.normal(size=(height, width, N_GROUPS)).astype(dtype))
     rows = (np.zeros((m, 2), dtype), np.zeros((m, 3), dtype), np.zeros(m, dtype), np.zeros((m, C), dtype))
-    module.rasterize_bwd(*args, *fwd_out, *grads, *rows)
+    module.rasterize_bwd(*args, *fwd_out, *grads, *rows, *records(module, args))
     return rows
 
 
@@ -157,7 +164,7 @@ def test_binning_and_reduction_match_the_baseline(dtype):
     tiles_y = (height + 15) // 16
     order = kernels.depth_order(depths.astype(dtype))
     rects = kernels.tile_rects(means.astype(dtype), radii.astype(np.int32), order, kernels.TILE, tiles_x, tiles_y)
-    offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y)
+    offsets, ids, row_start, rows = kernels.bin_tiles(order, rects, tiles_x, tiles_y, np.zeros(0, np.uint64))
     np.testing.assert_array_equal(offsets, offsets_b)
     np.testing.assert_array_equal(ids, ids_b)
     m, n_isect = means.shape[0], ids.shape[0]
@@ -179,3 +186,16 @@ def test_vector_exp_is_within_two_ulp_of_libm():
     got = np.array([kernels.exp_neg(v) for v in s])
     want = np.exp(-s)
     assert np.all(np.abs(got - want) <= 2 * np.spacing(want))
+
+
+def test_power_of_two_scale_is_exact():
+    """exp_neg's 2^-k from bits equals 2.0 ** -k for every k it can take, subnormals included."""
+    got = np.array([kernels.pow2_neg(k) for k in range(1075)])
+    np.testing.assert_array_equal(got, 2.0 ** -np.arange(1075.0))
+
+
+@pytest.mark.parametrize("tiles_x,tiles_y", [(80, 45), (5, 3), (1, 1), (7, 9), (3, 4), (1, 6)])
+def test_tile_order_visits_every_tile_once(tiles_x, tiles_y):
+    got = [kernels._tile_at(i, tiles_x, tiles_y) for i in range(tiles_x * tiles_y)]
+    assert sorted(t for t, _, _ in got) == list(range(tiles_x * tiles_y))
+    assert all(t == ty * tiles_x + tx and 0 <= tx < tiles_x and 0 <= ty < tiles_y for t, tx, ty in got)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
+from symdrive_core.splat import proj_kernels
 from symdrive_core.splat.projection import project_gaussians, project_gaussians_torch
 from symdrive_core.splat.sh import eval_sh, eval_sh_torch, sh_to_color, sh_to_color_torch
 
@@ -150,3 +152,18 @@ def test_numba_sh_float32_and_errors():
     with pytest.raises(ValueError):
         eval_sh(4, sh, dirs)
     assert math.isfinite(float(eval_sh(0, sh[:0], dirs[:0]).sum()))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_rows_finite_flags_every_non_finite_entry(dtype):
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(300, 48)).astype(dtype)
+    a[:, 0] = np.finfo(dtype).max  # huge, tiny and signed zeros are finite
+    a[:, 1] = -np.finfo(dtype).tiny / 4
+    a[:, 2] = -0.0
+    bad = rng.choice(300, 40, replace=False)
+    a[bad, rng.integers(0, 48, 40)] = rng.choice([np.inf, -np.inf, np.nan], 40)
+    out = np.empty(300, np.bool_)
+    proj_kernels.rows_finite(a, out)
+    np.testing.assert_array_equal(out, np.isfinite(a).all(1))
+    assert (~out).sum() == 40
