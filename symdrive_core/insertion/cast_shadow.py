@@ -27,7 +27,7 @@ from ..scene import Pose
 from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
 from ..splat.frozen_view import FrozenView
 from ..splat.projection import quat_to_rotmat
-from ..splat.rasterize import RasterizePixels, bin_gaussians
+from ..splat.rasterizer import RasterizePixels, bin_gaussians
 from .place import place
 from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z
 

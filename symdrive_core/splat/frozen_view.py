@@ -19,7 +19,7 @@ from ..gaussians import Gaussians
 from ..scene.camera import CameraView
 from .constants import ALPHA_THRESHOLD
 from .projection import project_gaussians
-from .rasterize import RasterizePixels, bin_gaussians
+from .rasterizer import RasterizePixels, bin_gaussians
 from .sh import sh_to_color
 from .tensors import GaussianTensors
 

@@ -21,7 +21,7 @@ from . import kernels, kernels_baseline
 from .constants import ALPHA_THRESHOLD, TILE_SIZE
 from .numba_scope import KernelScope
 from .projection import project_gaussians
-from .rasterize import _np, _rows_finite
+from .rasterizer import _np, _rows_finite
 from .sh import sh_to_color
 
 

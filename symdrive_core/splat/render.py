@@ -22,7 +22,7 @@ from ..gaussians import Gaussians, sh_coeff_count
 from ..scene.camera import CameraView
 from .compose import Layer, compose_layers
 from .constants import ALPHA_THRESHOLD
-from .rasterize import rasterize
+from .rasterizer import rasterize
 
 __all__ = ["Layer", "SplatRenderer", "params_from_gaussians", "render_layers", "render_params"]
 
@@ -66,7 +66,7 @@ def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Pa
 def render_params(params: dict[str, torch.Tensor], K, viewmat, width: int, height: int,
                   sh_degree: int, render_depth: bool = False, **raster_options):
     """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info).
-    ``raster_options`` go to :func:`symdrive_core.splat.rasterize` (antialiased, extent, ...)."""
+    ``raster_options`` go to :func:`~.rasterizer.rasterize` (antialiased, extent, ...)."""
     sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
         [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
     quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)

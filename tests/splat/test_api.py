@@ -23,12 +23,17 @@ def test_package_import_is_light():
     assert out.split() == ["False", "False"]
 
 
-def test_rasterize_name_is_the_function():
+def test_exported_names_are_the_functions_even_after_their_modules_load():
+    import symdrive_core.splat.rasterizer  # noqa: F401  (binds the submodule on the package)
+    import symdrive_core.splat.render  # noqa: F401
     from symdrive_core import splat
-    from symdrive_core.splat.rasterize import RasterizePixels  # the module stays importable
+    from symdrive_core.splat.rasterizer import RasterizePixels
 
     assert callable(splat.rasterize) and not isinstance(splat.rasterize, type(sys))
     assert RasterizePixels is splat.RasterizePixels
+    assert set(splat.__all__) <= set(dir(splat))
+    for name in splat.__all__:
+        assert not isinstance(getattr(splat, name), type(sys)), name
 
 
 @pytest.mark.parametrize("deg", [0, 1, 2, 3])

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from symdrive_core.splat import kernels
-from symdrive_core.splat.rasterize import bin_gaussians
+from symdrive_core.splat.rasterizer import bin_gaussians
 
 from .test_kernels_baseline import N_GROUPS, THRESHOLD, backward, forward, scene_2d
 
