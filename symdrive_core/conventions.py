@@ -25,6 +25,9 @@ WORLD_UP = np.array([0.0, 0.0, 1.0])
 CAMERA_CONVENTION = "opencv"
 QUATERNION_ORDER = "wxyz"
 PIXEL_CENTER_OFFSET = 0.5
+NEAR_PLANE = 0.01  # metres: what is closer to a camera than this is not drawn (nor checked for visibility)
+FAR_PLANE = 1e10  # metres: nor what is farther than this
+
 """Add to an integer pixel index to get the coordinate of that pixel's centre."""
 
 # Blender's camera looks down its local -Z with +Y up; OpenCV looks down +Z with +Y down.

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..conventions import NEAR_PLANE
 from ..errors import InputError
 from ..io.ply import read_header, read_splats
 from ..scene import Manifest, ManifestError, box_corners_world, box_in_frustum, vehicle_local_box
@@ -46,7 +47,7 @@ class StageDecision:
 class PlanOptions:
     refine: bool = True
     evaluate: bool = True
-    near: float = 0.01
+    near: float = NEAR_PLANE
 
 
 @dataclass

@@ -20,7 +20,7 @@ def box_corners_world(local_min, local_max, rotation: np.ndarray, translation: n
 
 
 def box_in_frustum(corners_world: np.ndarray, w2c: np.ndarray, K: np.ndarray, width: int, height: int,
-                   near: float = 0.01, far: float = 1e10) -> bool:
+                   near: float = conventions.NEAR_PLANE, far: float = conventions.FAR_PLANE) -> bool:
     """False only if the box is certainly outside the camera's view."""
     w2c = np.asarray(w2c, dtype=np.float64)
     p = np.asarray(corners_world, dtype=np.float64) @ w2c[:3, :3].T + w2c[:3, 3]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..conventions import FAR_PLANE, NEAR_PLANE
 from ..rotations import matrix_to_quat, quat_multiply
 from ..scene.visibility import box_corners_world, box_in_frustum
 from .projection import camera_center
@@ -55,7 +56,7 @@ def rotate_quats(R: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
 
 
 def compose_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
-                   near: float = 0.01, far: float = 1e10, cull: bool = True, sh_backend: str = "auto") -> Composed:
+                   near: float = NEAR_PLANE, far: float = FAR_PLANE, cull: bool = True, sh_backend: str = "auto") -> Composed:
     """The layers placed, culled and coloured for the camera ``viewmat`` / ``K``."""
     device = viewmat.device
     dtype = None

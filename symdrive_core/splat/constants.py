@@ -11,3 +11,5 @@ ALPHA_MAX = 0.99  # alpha clamp
 T_STOP = 1e-4  # a pixel stops when its transmittance would fall to this or below
 EXTENT_CAP = 3.33  # screen extent of a Gaussian in sigmas at the default threshold (gsplat's rule)
 TILE_SIZE = 16  # pixels per tile side
+EPS2D = 0.3  # added to the 2D covariance's diagonal (pixels^2): the low-pass of 3DGS and gsplat
+FOV_CLAMP_MARGIN = 0.3  # camera-space means clamped to (1 + this) x the half field of view for the Jacobian (3DGS)

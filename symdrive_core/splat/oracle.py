@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from .constants import ALPHA_MAX, ALPHA_THRESHOLD, EXTENT_CAP, T_STOP
+from ..conventions import FAR_PLANE, NEAR_PLANE
+from .constants import ALPHA_MAX, ALPHA_THRESHOLD, EPS2D, EXTENT_CAP, FOV_CLAMP_MARGIN, T_STOP
 
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
@@ -51,7 +52,7 @@ def _rotmat(q):
 
 
 def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, height, *, background=None,
-                  sh_degree=None, near=0.01, far=1e10, eps2d=0.3, antialiased=False, render_depth=False,
+                  sh_degree=None, near=NEAR_PLANE, far=FAR_PLANE, eps2d=EPS2D, antialiased=False, render_depth=False,
                   alpha_threshold=ALPHA_THRESHOLD, extent="opacity", tile_cull=True, tile_size=16):
     """Returns dict(rgb [H,W,C], alpha [H,W,1], depth [H,W,1] or None, radii [N,2]) in float64."""
     f = lambda a: np.asarray(a.detach().cpu().numpy() if hasattr(a, "detach") else a, dtype=np.float64)
@@ -78,8 +79,8 @@ def render_oracle(means, quats, scales, opacities, colors, viewmat, K, width, he
         x, y, z = p
         if z < near or z > far:
             continue
-        txz = min(max(x / z, -(cx / fx + 0.3 * tanx)), (width - cx) / fx + 0.3 * tanx)
-        tyz = min(max(y / z, -(cy / fy + 0.3 * tany)), (height - cy) / fy + 0.3 * tany)
+        txz = min(max(x / z, -(cx / fx + FOV_CLAMP_MARGIN * tanx)), (width - cx) / fx + FOV_CLAMP_MARGIN * tanx)
+        tyz = min(max(y / z, -(cy / fy + FOV_CLAMP_MARGIN * tany)), (height - cy) / fy + FOV_CLAMP_MARGIN * tany)
         J = np.array([[fx / z, 0.0, -fx * txz / z], [0.0, fy / z, -fy * tyz / z]])
         M = _rotmat(quats[i]) @ np.diag(scales[i])
         cov = J @ R @ M @ M.T @ R.T @ J.T

@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .constants import ALPHA_THRESHOLD, EXTENT_CAP
+from ..conventions import FAR_PLANE, NEAR_PLANE
+from .constants import ALPHA_THRESHOLD, EPS2D, EXTENT_CAP, FOV_CLAMP_MARGIN
 
 AA_COMPENSATION_FLOOR = 0.005 ** 2
 RADIUS_MAX = float(2 ** 30)  # radii are clamped before converting to integers
@@ -90,7 +91,7 @@ def extent_factor(extent, opac: torch.Tensor, alpha_threshold: float) -> torch.T
 
 
 def project_gaussians_torch(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
-                            near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                            near: float = NEAR_PLANE, far: float = FAR_PLANE, eps2d: float = EPS2D, antialiased: bool = False,
                             extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                             finite_mask: torch.Tensor | None = None) -> Projection:
     """The vectorised torch projection (reference; gradients by autograd)."""
@@ -121,8 +122,8 @@ def project_gaussians_torch(means, quats, scales, opacities, viewmat, K, width: 
     Kd = K.detach().to(f64)
     fx, fy, cx, cy = (float(Kd[0, 0]), float(Kd[1, 1]), float(Kd[0, 2]), float(Kd[1, 2]))
     tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
-    lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
-    lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
+    lim_x_pos, lim_x_neg = (width - cx) / fx + FOV_CLAMP_MARGIN * tan_fovx, cx / fx + FOV_CLAMP_MARGIN * tan_fovx
+    lim_y_pos, lim_y_neg = (height - cy) / fy + FOV_CLAMP_MARGIN * tan_fovy, cy / fy + FOV_CLAMP_MARGIN * tan_fovy
     rz = 1.0 / zs
     tx = zs * torch.clamp(xs * rz, -lim_x_neg, lim_x_pos)
     ty = zs * torch.clamp(ys * rz, -lim_y_neg, lim_y_pos)
@@ -244,7 +245,7 @@ class ProjectGaussians(torch.autograd.Function):
 
 
 def project_gaussians_numba(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
-                            near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                            near: float = NEAR_PLANE, far: float = FAR_PLANE, eps2d: float = EPS2D, antialiased: bool = False,
                             extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                             finite_mask: torch.Tensor | None = None) -> Projection:
     """The numba projection (CPU tensors): same outputs as :func:`project_gaussians_torch`."""
@@ -255,8 +256,8 @@ def project_gaussians_numba(means, quats, scales, opacities, viewmat, K, width: 
     Kd = K.detach().to(torch.float64)
     fx, fy, cx, cy = (float(Kd[0, 0]), float(Kd[1, 1]), float(Kd[0, 2]), float(Kd[1, 2]))
     tan_fovx, tan_fovy = 0.5 * width / fx, 0.5 * height / fy
-    lim_x_pos, lim_x_neg = (width - cx) / fx + 0.3 * tan_fovx, cx / fx + 0.3 * tan_fovx
-    lim_y_pos, lim_y_neg = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
+    lim_x_pos, lim_x_neg = (width - cx) / fx + FOV_CLAMP_MARGIN * tan_fovx, cx / fx + FOV_CLAMP_MARGIN * tan_fovx
+    lim_y_pos, lim_y_neg = (height - cy) / fy + FOV_CLAMP_MARGIN * tan_fovy, cy / fy + FOV_CLAMP_MARGIN * tan_fovy
     cam_args = (rv, np.ascontiguousarray(c.cpu().numpy()), fx, fy, cx, cy, lim_x_neg, lim_x_pos, lim_y_neg,
                 lim_y_pos, float(near), float(far), float(eps2d), bool(antialiased), AA_COMPENSATION_FLOOR)
     fwd_args = (mode, ext_k, cap, float(alpha_threshold), float(width), float(height), RADIUS_MAX)
@@ -274,7 +275,7 @@ def use_numba(*tensors) -> bool:
 
 
 def project_gaussians(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
-                      near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, antialiased: bool = False,
+                      near: float = NEAR_PLANE, far: float = FAR_PLANE, eps2d: float = EPS2D, antialiased: bool = False,
                       extent="opacity", alpha_threshold: float = ALPHA_THRESHOLD,
                       finite_mask: torch.Tensor | None = None, backend: str = "auto") -> Projection:
     """Project Gaussians (see the module docstring). ``backend``: ``"numba"``, ``"torch"`` or

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..conventions import FAR_PLANE, NEAR_PLANE
 from . import kernels
-from .constants import ALPHA_THRESHOLD, TILE_SIZE
+from .constants import ALPHA_THRESHOLD, EPS2D, TILE_SIZE
 from .numba_scope import KernelScope as _KernelScope
 from .projection import camera_center, project_gaussians, use_numba
 from .sh import sh_to_color
@@ -270,8 +271,8 @@ LOW_PRECISION = (torch.float16, torch.bfloat16)
 
 
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int, *,
-              background=None, sh_degree: int | None = None, near: float = 0.01, far: float = 1e10,
-              eps2d: float = 0.3, antialiased: bool = False, render_depth: bool = False,
+              background=None, sh_degree: int | None = None, near: float = NEAR_PLANE, far: float = FAR_PLANE,
+              eps2d: float = EPS2D, antialiased: bool = False, render_depth: bool = False,
               alpha_threshold: float = ALPHA_THRESHOLD, extent="opacity", backend: str = "auto",
               groups: torch.Tensor | None = None, n_groups: int = 0):
     """Render activated Gaussians. Returns ``(rgb [H,W,C], alpha [H,W,1], info)``.

@@ -18,17 +18,18 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ..conventions import FAR_PLANE, NEAR_PLANE
 from ..gaussians import Gaussians, sh_coeff_count
 from ..scene.camera import CameraView
 from .compose import Layer, compose_layers
-from .constants import ALPHA_THRESHOLD
+from .constants import ALPHA_THRESHOLD, EPS2D
 from .rasterizer import rasterize
 
 __all__ = ["Layer", "SplatRenderer", "params_from_gaussians", "render_layers", "render_params"]
 
 
 def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
-                  background=None, near: float = 0.01, far: float = 1e10, eps2d: float = 0.3,
+                  background=None, near: float = NEAR_PLANE, far: float = FAR_PLANE, eps2d: float = EPS2D,
                   antialiased: bool = False, alpha_threshold: float = ALPHA_THRESHOLD, extent="opacity",
                   backend: str = "auto", cull: bool = True) -> dict:
     """Render layers together in ONE rasterizer call. Returns dict(rgb [H,W,3], alpha [H,W,1],

@@ -8,8 +8,10 @@ import symdrive_core
 from symdrive_core.splat import constants
 
 CORE = Path(symdrive_core.__file__).parent
-RULES = {constants.ALPHA_THRESHOLD: "ALPHA_THRESHOLD", constants.ALPHA_MAX: "ALPHA_MAX", constants.T_STOP: "T_STOP",
-         constants.EXTENT_CAP: "EXTENT_CAP"}
+NAMES = ("ALPHA_THRESHOLD", "ALPHA_MAX", "T_STOP", "EXTENT_CAP", "EPS2D", "FOV_CLAMP_MARGIN")
+RULES: dict[float, str] = {}
+for _name in NAMES:  # equal values (EPS2D and FOV_CLAMP_MARGIN are both 0.3) share one entry
+    RULES[getattr(constants, _name)] = " or ".join(filter(None, (RULES.get(getattr(constants, _name)), _name)))
 
 
 def _value(node):
