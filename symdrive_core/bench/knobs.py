@@ -17,7 +17,7 @@ import torch
 
 from ..diffusion.harmonize import CROP_MARGIN
 from ..pipeline.stages import StageOptions
-from ..scene.ground_truth import with_placements
+from ..scene.ground_truth import has_insertion_truth, has_lateral_truth, with_placements
 from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
 
@@ -273,20 +273,20 @@ def package_settings(manifest, quick: bool = False) -> tuple[list[Setting], dict
     if not manifest.background_splats:
         return [], {"all": "the package has no background splats to render"}
     gaussians = read_splats(manifest.resolve(manifest.background_splats))
-    gt = manifest.ground_truth or {}
+    lateral, insertion = has_lateral_truth(manifest), has_insertion_truth(manifest)
     settings, skipped = [], {}
     if split_frames(manifest)[1] and all(f.image for f in manifest.cameras[0].frames):
         settings += renderer_settings(manifest, gaussians, budget)
     else:
         skipped["renderer"] = "no held-out recorded frames"
-    restorer = load_restorer() if gt.get("lateral") or gt.get("insertion") else None
-    if gt.get("lateral"):
+    restorer = load_restorer() if lateral or insertion else None
+    if lateral:
         settings += restorer_settings(manifest, gaussians, restorer, budget)
     else:
         skipped["restorer"] = "no lateral ground truth"
-    if gt.get("insertion") and manifest.effects.sun_direction is not None:
+    if insertion and manifest.effects.sun_direction is not None:
         settings += shadow_settings(manifest, gaussians, budget)
-    if gt.get("insertion"):
+    if insertion:
         settings += harmonize_settings(manifest, gaussians, restorer, budget)
         settings += finetune_settings(manifest, gaussians, restorer, budget)
     else:

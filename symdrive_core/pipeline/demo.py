@@ -31,13 +31,14 @@ def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: 
     The default speed is 1.1 times the recording camera's, so the car pulls slowly away from it."""
     from ..rotations import quat_from_yaw
     from ..scene.poses import Pose
+    from ..traffic.road import road_from_json
 
     if speed_mps is None:
         centres = [f.camera_to_world[:3, 3] for f in manifest.cameras[0].frames]
         duration = manifest.frames[-1].timestamp - manifest.frames[0].timestamp
         path = float(np.sum(np.linalg.norm(np.diff(centres, axis=0), axis=1)))
         speed_mps = 1.1 * path / duration if duration > 0 else 0.0
-    line = np.asarray(manifest.ground_truth["road"]["centerline"], dtype=np.float64)
+    line = road_from_json(manifest.ground_truth["road"], manifest.path).centerline
     seg = np.linalg.norm(np.diff(line[:, :2], axis=0), axis=1)
     along = np.concatenate([[0.0], np.cumsum(seg)])
     cam0 = manifest.cameras[0].frames[0].camera_to_world[:3, 3]
