@@ -153,6 +153,13 @@ def ellipse_half_extent(a, b, c, lim):
             math.sqrt(s * a) * (1.0 + BOX_MARGIN) + BOX_MARGIN)
 
 
+@njit(cache=True, inline="always")
+def _tile_range(m, r, tile_size, n_tiles):
+    """Tiles [t0, t1) that the box ``m +- r`` (pixels) touches, gsplat's floor/ceil rule, within [0, n_tiles]."""
+    return (int(min(max(0.0, math.floor((m - r) / tile_size)), float(n_tiles))),
+            int(min(max(0.0, math.ceil((m + r) / tile_size)), float(n_tiles))))
+
+
 @njit(parallel=True, cache=True)
 def tile_rects(means2d, radii, order, tile_size, tiles_x, tiles_y):
     """Tile rectangle [x0, x1) x [y0, y1) (gsplat's floor/ceil rule) of Gaussian ``order[j]`` in row j.
@@ -166,13 +173,14 @@ def tile_rects(means2d, radii, order, tile_size, tiles_x, tiles_y):
     for i in prange(n):
         rx = float(radii[i, 0])
         ry = float(radii[i, 1])
-        mx = float(means2d[i, 0])
-        my = float(means2d[i, 1])
-        empty = rx <= 0.0 and ry <= 0.0
-        own[i, 0] = 0 if empty else np.int32(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x)))
-        own[i, 1] = 0 if empty else np.int32(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x)))
-        own[i, 2] = 0 if empty else np.int32(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y)))
-        own[i, 3] = 0 if empty else np.int32(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y)))
+        x0, x1, y0, y1 = 0, 0, 0, 0
+        if rx > 0.0 or ry > 0.0:
+            x0, x1 = _tile_range(float(means2d[i, 0]), rx, tile_size, tiles_x)
+            y0, y1 = _tile_range(float(means2d[i, 1]), ry, tile_size, tiles_y)
+        own[i, 0] = x0
+        own[i, 1] = x1
+        own[i, 2] = y0
+        own[i, 3] = y1
     m = order.shape[0]
     rects = np.empty((m, 4), dtype=np.int32)
     for j in prange(m):
@@ -279,12 +287,10 @@ def ellipse_rects(means2d, radii, conics, opac, order, threshold, width, height,
         c = float(conics[i, 2])
         lim = sigma_limit(float(opac[i]), threshold)
         hx, hy = ellipse_half_extent(a, b, c, lim)
-        x0, x1 = _box_tiles(mx, hx, width,
-                            int(min(max(0.0, math.floor((mx - rx) / tile_size)), float(tiles_x))),
-                            int(min(max(0.0, math.ceil((mx + rx) / tile_size)), float(tiles_x))))
-        y0, y1 = _box_tiles(my, hy, height,
-                            int(min(max(0.0, math.floor((my - ry) / tile_size)), float(tiles_y))),
-                            int(min(max(0.0, math.ceil((my + ry) / tile_size)), float(tiles_y))))
+        t0, t1 = _tile_range(mx, rx, tile_size, tiles_x)
+        x0, x1 = _box_tiles(mx, hx, width, t0, t1)
+        t0, t1 = _tile_range(my, ry, tile_size, tiles_y)
+        y0, y1 = _box_tiles(my, hy, height, t0, t1)
         if x0 == x1 or y0 == y1:
             continue
         snug[i, 0] = x0
@@ -514,6 +520,17 @@ def _fwd_row(st, p0, xw, width, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c
     return stops, kept
 
 
+@njit(cache=True, inline="always")
+def _unpack_record(g, x0, x1, y0, y1):
+    """A packed record's 2D mean, conic, opacity, sigma limit and group, and its pixel span in the tile
+    [x0, x1) x [y0, y1) (empty when px0 == px1): forward and backward read a record the same way."""
+    mx = g[R_MX]
+    my = g[R_MY]
+    px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
+    py0, py1 = pixel_span(my, g[R_HY], y0, y1)
+    return mx, my, g[R_A], g[R_B], g[R_C], g[R_O], g[R_LIM], int(g[R_GROUP]), px0, px1, py0, py1
+
+
 @njit(parallel=True, cache=True)
 def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids, width, height, tiles_x,
                   tile_size, threshold, out_color, out_T, out_inst, out_last, rec):
@@ -557,16 +574,7 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 loaded = min(n, loaded + LOAD_CHUNK)
                 _copy_records(rec, ids, start, k, loaded, loc)
             g = loc[k]
-            mx = g[R_MX]
-            my = g[R_MY]
-            a = g[R_A]
-            b = g[R_B]
-            c = g[R_C]
-            o = g[R_O]
-            lk = g[R_LIM]
-            grp = int(g[R_GROUP])
-            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
-            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
+            mx, my, a, b, c, o, lk, grp, px0, px1, py0, py1 = _unpack_record(g, x0, x1, y0, y1)
             if px0 == px1:
                 continue
             for ch in range(C):
@@ -685,16 +693,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
         lanes = np.zeros((6 + nch) * TILE)
         for k in range(n_end):
             g = loc[k]
-            mx = g[R_MX]
-            my = g[R_MY]
-            a = g[R_A]
-            b = g[R_B]
-            c = g[R_C]
-            o = g[R_O]
-            lk = g[R_LIM]
-            grp = int(g[R_GROUP])
-            px0, px1 = pixel_span(mx, g[R_HX], x0, x1)
-            py0, py1 = pixel_span(my, g[R_HY], y0, y1)
+            mx, my, a, b, c, o, lk, grp, px0, px1, py0, py1 = _unpack_record(g, x0, x1, y0, y1)
             if px0 == px1:
                 continue
             for ch in range(C):
