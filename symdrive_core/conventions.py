@@ -78,6 +78,16 @@ def lateral_shift(c2w_opencv: np.ndarray, offset_m: float) -> np.ndarray:
     return c2w
 
 
+def both_sides(distances) -> list[float]:
+    """Signed lateral offsets for unsigned distances: each distance ``d`` (metres) gives the views at
+    ``-d`` and ``+d``, nearest first, left before right.
+
+    The one rule behind every ``--offsets`` option: a command line names distances, a manifest's
+    ``effects.lateral_offsets`` names signed offsets (positive = right, as :func:`lateral_shift`).
+    """
+    return sorted({s * abs(float(d)) for d in distances for s in (-1, 1) if d != 0}, key=lambda o: (abs(o), o))
+
+
 def intrinsics(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)
 

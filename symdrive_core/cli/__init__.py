@@ -167,6 +167,23 @@ def add_frames_option(p: argparse.ArgumentParser, flag: str = "--frames", *, hel
     p.add_argument(flag, type=frames_arg, metavar="LIST", help=f"{help}; LIST as 0:3,7 (ranges inclusive)")
 
 
+def distances_arg(text: str) -> list[float]:
+    """``--offsets`` of every command: comma-separated positive distances in metres."""
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated distances in metres, got {text!r}") from None
+    if not values or not all(0 < v < float("inf") for v in values):
+        raise argparse.ArgumentTypeError(f"expected positive distances in metres, got {text!r}")
+    return values
+
+
+def add_offsets_option(p: argparse.ArgumentParser, *, help: str, default: list[float] | None = None) -> None:
+    """``--offsets D,...``: lateral distances, each restored on both sides (``conventions.both_sides``)."""
+    p.add_argument("--offsets", type=distances_arg, default=default, metavar="D,...",
+                   help=f"{help}; each distance d (m) means the views at -d and +d")
+
+
 def json_target(value: str) -> str:
     """``--json`` FILE or ``-`` (stdout); the folder must exist, so a typo fails before the work."""
     if value == "-":

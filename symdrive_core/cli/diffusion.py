@@ -12,7 +12,16 @@ from pathlib import Path
 
 from ..diffusion.defaults import CYCLE_DEFAULTS, EVALUATED_METHODS, SAMPLER_DEFAULTS
 from ..pipeline.stages import StageOptions
-from . import add_frames_option, add_quiet_option, add_renamed_option, count_int, device_arg, positive_int
+from . import (
+    add_frames_option,
+    add_offsets_option,
+    add_quiet_option,
+    add_renamed_option,
+    count_int,
+    device_arg,
+    distances_arg,
+    positive_int,
+)
 
 
 def _floats(text: str) -> list[float]:
@@ -30,13 +39,6 @@ def _names(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(f"unknown method {bad[0] if bad else text!r} (expected single_view, "
                                          "ar_d<metres>, warp, geo_single_view or geo_ar_d<metres>)")
     return names
-
-
-def _distances(text: str) -> list[float]:
-    values = _floats(text)
-    if not values or any(v <= 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive distances in metres, got {text!r}")
-    return values
 
 
 def _signed_offsets(text: str) -> list[float]:
@@ -57,7 +59,7 @@ def add_commands(sub) -> None:
         "--gaussians", type=Path, metavar="PLY", help="reconstruction PLY (default: the manifest's background splats)"
     )
     p.add_argument(
-        "--offsets", type=_distances, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
+        "--offsets", type=distances_arg, default=[0.5, 1.0, 1.5, 2.0, 2.5, 3.0], help="distances d in metres"
     )
     add_frames_option(p, help="recorded frames (default: the training frames)")
     p.add_argument(
@@ -150,13 +152,9 @@ def add_commands(sub) -> None:
     p.add_argument(
         "--gaussians", type=Path, metavar="PLY", help="reconstruction PLY (default: the manifest's background splats)"
     )
-    p.add_argument(
-        "--offsets",
-        type=_floats,
-        default=[0.5, 1.0, 1.5, 2.0, 3.0],
-        help="metres; each is restored on both sides (with --evaluate, the views --refine trains on; "
-             "scoring covers every offset with ground truth)",
-    )
+    add_offsets_option(p, default=[0.5, 1.0, 1.5, 2.0, 3.0],
+                       help="the views to restore (with --evaluate, the views --refine trains on; scoring "
+                            "covers every offset with ground truth)")
     p.add_argument("--step", type=float, default=StageOptions.ar_step,
                    help=f"chain step d in metres (0 = single-view; default {StageOptions.ar_step:g})")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")

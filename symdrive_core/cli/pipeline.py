@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from ..pipeline.stages import StageOptions
-from . import add_frames_option, add_json_option, add_quiet_option, positive_int
+from . import add_frames_option, add_json_option, add_offsets_option, add_quiet_option, positive_int
 
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
 
@@ -24,6 +24,9 @@ def add_commands(sub) -> None:
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--no-refine", action="store_true", help="run without 3DGS refinement")
+    add_frames_option(p, help="the frame window: render, restore and harmonize only these recorded frames "
+                              "(default: all; reconstruction fits every frame)")
+    add_offsets_option(p, help="lateral views to restore instead of the manifest's effects.lateral_offsets")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
@@ -83,8 +86,12 @@ def _run(args) -> int:
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
 
+    from ..conventions import both_sides
+
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
-    report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
+    options = PlanOptions(refine=not args.no_refine, frames=args.frames,
+                          offsets=None if args.offsets is None else tuple(both_sides(args.offsets)))
+    report = run_scene(args.package, args.out, options=options,
                        device=args.device, progress=not args.quiet, force=args.force,
                        allow_external=args.allow_external_assets, stage_options=stage_options)
     for s in report["stages"]:

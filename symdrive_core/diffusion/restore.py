@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from ..conventions import both_sides
 from ..gaussians import Gaussians
 from ..io.images import read_image
 from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
@@ -224,7 +225,7 @@ def restore_lateral_views(
     render = SplatRenderer(gaussians)
     chains = {} if chains is None else chains
     warper = _warper(manifest, cam, gaussians) if guided else None
-    signed = sorted({s * abs(o) for o in offsets for s in (-1, 1) if o != 0}, key=lambda o: (abs(o), o))
+    signed = both_sides(offsets)
     views = []
     for fi in tqdm(frames, desc="restore", unit="frame", disable=not progress):
         if fi not in chains:

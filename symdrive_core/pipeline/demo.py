@@ -19,9 +19,10 @@ from .stages import StageOptions
 
 DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
-QUICK = StageOptions(frames=[12], offsets=(1.0, 3.0), eval_methods=("single_view", "ar_d0.5"),
-                     finetune_steps=80, insertion_train_views=2)
-FULL = StageOptions(frames=[2, 12, 22], refine_iters=300)
+# The demo's window: frames with lateral truth, and in the quick run the right side at 1 and 3 m.
+QUICK = (PlanOptions(refine=False, frames=[12], offsets=(1.0, 3.0)),
+         StageOptions(eval_methods=("single_view", "ar_d0.5"), finetune_steps=80, insertion_train_views=2))
+FULL = (PlanOptions(frames=[2, 12, 22]), StageOptions(refine_iters=300))
 
 
 def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: float | None = None,
@@ -131,7 +132,8 @@ def run_demo(out: str | Path, quick: bool = False, progress: bool = True, force:
         return _run_demo(tree, QUICK if quick else FULL, quick, progress, force)
 
 
-def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool, force: bool) -> dict:
+def _run_demo(tree: OutputTree, options: tuple[PlanOptions, StageOptions], quick: bool, progress: bool,
+              force: bool) -> dict:
     import time
 
     from ..insertion.assets import load_vehicle_asset
@@ -148,12 +150,13 @@ def _run_demo(tree: OutputTree, opts: StageOptions, quick: bool, progress: bool,
 
     out = tree.root
     t0 = time.perf_counter()
-    report = run_scene(DEMO_PACKAGE, out, options=PlanOptions(refine=not quick), stage_options=opts,
+    plan_options, stage_options = options
+    report = run_scene(DEMO_PACKAGE, out, options=plan_options, stage_options=stage_options,
                        progress=progress, force=force, lock=False)
     manifest = load_manifest(DEMO_PACKAGE)
     background = read_splats(manifest.resolve(manifest.background_splats))
     figures = tree.folder("figures")
-    fi = opts.frames[0]
+    fi = plan_options.frames[0]
 
     lateral = [v for v in lateral_views(manifest) if v.frame == fi and abs(v.offset_m) == 3.0 and v.offset_m > 0]
     if lateral:

@@ -25,8 +25,6 @@ from ..io.ply import read_header, read_splats
 from ..scene import Manifest, ManifestError, box_corners_world, box_in_frustum, vehicle_local_box
 from .cache_key import inputs_key
 
-STAGES = ("reconstruct", "render", "cast_shadow", "restore", "refine", "harmonize", "finetune",
-          "sh_eval", "evaluate")
 DIFFUSION_STAGES = ("restore", "harmonize")
 # Sub-effects decided here but applied inside another stage (no runner of their own); they are
 # cached exactly when their host stage is.
@@ -40,6 +38,7 @@ class StageDecision:
     reason: str
     frames: list[int] | None = None
     actors: list[str] | None = None
+    offsets: list[float] | None = None  # restore: the signed lateral offsets (metres)
     cached: bool = False
 
 
@@ -48,6 +47,12 @@ class PlanOptions:
     refine: bool = True
     evaluate: bool = True
     near: float = NEAR_PLANE
+    # The frame window: render, restore and harmonize only these recorded frames (None: every
+    # frame). Reconstruction still fits every recorded frame; scoring keeps to the window.
+    frames: list[int] | None = None
+    # Signed lateral offsets to restore instead of the manifest's ``effects.lateral_offsets``
+    # (``conventions.both_sides`` turns a command line's distances into these).
+    offsets: tuple[float, ...] | None = None
 
 
 @dataclass
@@ -61,6 +66,8 @@ class Plan:
     sh_degrees: dict[str, int]
     inputs_hash: str = ""
     notes: list[str] = field(default_factory=list)
+    window: list[int] | None = None  # PlanOptions.frames, checked against the package
+
 
     def stage(self, name: str) -> StageDecision:
         return next(s for s in self.stages if s.name == name)
@@ -156,6 +163,15 @@ def _has_ground_truth(manifest: Manifest) -> bool:
     return any(cf.image for cam in manifest.cameras for cf in cam.frames)
 
 
+def _has_training_images(manifest: Manifest) -> bool:
+    """Refinement keeps the recorded training frames of the first camera in its loss
+    (``optim.reconstruct.load_views``): each needs its image."""
+    from ..scene.ground_truth import split_frames
+
+    train, cam = split_frames(manifest)[0], manifest.cameras[0]
+    return bool(train) and all(cam.frames[i].image for i in train)
+
+
 def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
     """Inserted vehicles cast shadows where the scene has a sun (recorded ones carry theirs)."""
     from ..insertion.shadow import sun_above_horizon
@@ -176,6 +192,18 @@ def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
                          f"{eff.shade:.2f} of the light)", frames, seen)
 
 
+def _window(manifest: Manifest, frames: list[int] | None) -> list[int] | None:
+    """``PlanOptions.frames`` in order, each a frame of the package (else exit 2 naming it)."""
+    if frames is None:
+        return None
+    n = len(manifest.frames)
+    bad = [f for f in frames if not 0 <= int(f) < n]
+    if bad or not frames:
+        what = f"frame {bad[0]} is not in the package (0 to {n - 1})" if bad else "the frame window is empty"
+        raise ManifestError(manifest.path or manifest.root, what, "frames")
+    return sorted({int(f) for f in frames})
+
+
 def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None,
               key: str | None = None) -> Plan:
     """Decide every stage for this scene. ``previous`` is the last run's state and ``key`` this
@@ -185,6 +213,8 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     check_renderable(manifest)
     visible, culled = _visibility(manifest, opt.near)
     frames_all = list(range(len(manifest.frames)))
+    window = _window(manifest, opt.frames)
+    in_window = frames_all if window is None else window
     stages: list[StageDecision] = []
 
     if manifest.background_splats:
@@ -195,30 +225,40 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     else:
         stages.append(StageDecision("reconstruct", False, "no background splats and no images to fit"))
 
-    stages.append(StageDecision("render", True, "always", frames_all,
-                                sorted({a for cam in visible.values() for ids in cam.values() for a in ids})))
-    stages.append(_cast_shadow(manifest, visible))
+    # The decisions below see only the window's frames; plan.visible keeps every frame.
+    shown = {cam: {fi: ids for fi, ids in frames.items() if fi in in_window} for cam, frames in visible.items()}
+    stages.append(StageDecision("render", True, "always" if window is None else "the frame window", in_window,
+                                sorted({a for cam in shown.values() for ids in cam.values() for a in ids})))
+    stages.append(_cast_shadow(manifest, shown))
 
-    if eff.lateral_offsets:
-        offs = ", ".join(f"{o:g}" for o in eff.lateral_offsets)
-        stages.append(StageDecision("restore", True, f"lateral offsets {offs} m requested", frames_all))
-        stages.append(StageDecision("refine", opt.refine, "refine the reconstruction on restored views"
-                                    if opt.refine else "refinement disabled"))
+    offsets = [float(o) for o in (eff.lateral_offsets if opt.offsets is None else opt.offsets)]
+    if offsets:
+        offs = ", ".join(f"{o:g}" for o in offsets)
+        source = "requested" if opt.offsets is None else "requested on the command line"
+        stages.append(StageDecision("restore", True, f"lateral offsets {offs} m {source}", in_window,
+                                    offsets=offsets))
+        if not opt.refine:
+            stages.append(StageDecision("refine", False, "refinement disabled"))
+        elif not _has_training_images(manifest):
+            stages.append(StageDecision("refine", False, "no recorded images to refine against"))
+        else:
+            stages.append(StageDecision("refine", True, "refine the reconstruction on restored views"))
     else:
         stages.append(StageDecision("restore", False, "no lateral offsets"))
         stages.append(StageDecision("refine", False, "no restored views"))
 
     inserted = [a.id for a in manifest.inserted_actors]
-    seen = {a for cam in visible.values() for ids in cam.values() for a in ids}
+    seen = {a for cam in shown.values() for ids in cam.values() for a in ids}
     harm_actors = [a for a in inserted if a in seen]
-    harm_frames = sorted({fi for cam in visible.values() for fi, ids in cam.items()
+    harm_frames = sorted({fi for cam in shown.values() for fi, ids in cam.items()
                           if any(a in harm_actors for a in ids)})
     if not inserted:
         harm = StageDecision("harmonize", False, "no inserted actor")
     elif not eff.harmonize:
         harm = StageDecision("harmonize", False, "harmonization off in the scene's effects")
     elif not harm_frames:
-        harm = StageDecision("harmonize", False, "inserted actors are outside every frustum")
+        harm = StageDecision("harmonize", False, "inserted actors are outside every frustum"
+                             + ("" if window is None else " in the frame window"))
     else:
         harm = StageDecision("harmonize", True, f"{len(harm_actors)} inserted actor(s) visible",
                              harm_frames, harm_actors)
@@ -246,7 +286,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
                                 else ("evaluation disabled" if has_gt else "no ground truth")))
 
     plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,
-                visible, culled, degrees, key or inputs_key(manifest, opt))
+                visible, culled, degrees, key or inputs_key(manifest, opt), window=window)
     if previous and previous.get("inputs_hash") == plan.inputs_hash:
         # A stage is reused only if every running stage after it is too: later stages take
         # what earlier ones hand over in memory, so the first stage to redo redoes the rest.

@@ -22,11 +22,17 @@ class Report:
     metrics: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
 
-    def stage(self, name: str, ran: bool, reason: str, seconds: float | None = None, **details) -> None:
+    def stage(self, name: str, ran: bool, reason: str, seconds: float | None = None,
+              details: dict | None = None) -> None:
+        """One row of ``stages``. A stage's own details come after the row's keys and may not
+        replace them (the stage's wall time is ``seconds``, measured by the runner)."""
         row = {"name": name, "ran": ran, "reason": reason}
         if seconds is not None:
             row["seconds"] = round(float(seconds), 3)
-        row.update(details)
+        clash = sorted(set(row) & set(details or {}))
+        if clash:
+            raise ValueError(f"stage {name!r} details may not redefine {', '.join(clash)}")
+        row.update(details or {})
         self.stages.append(row)
 
     def to_json(self) -> dict:

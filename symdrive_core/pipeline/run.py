@@ -64,7 +64,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
                 dt = time.perf_counter() - t0
                 state.finish(name, dt, result.metrics)
                 merge_metrics(report.metrics, result.metrics)
-                report.stage(name, True, decision.reason, dt, **result.details)
+                report.stage(name, True, decision.reason, dt, result.details)
         report.write(tree.root)
     return report.to_json()
 

@@ -25,8 +25,6 @@ from ..scene.ground_truth import has_insertion_truth, has_lateral_truth
 class StageOptions:
     """Knobs that trade quality for time (``symdrive bench accuracy-time`` measures them)."""
 
-    frames: list[int] | None = None  # restore/evaluate only these frames (None: all)
-    offsets: tuple[float, ...] | None = None  # restore/evaluate only these lateral offsets (None: all)
     ar_step: float = 0.5  # auto-regressive step d in metres (the paper's 0.5)
     # Guide the chain by the recorded neighbours warped over the ground (diffusion.warp): its start
     # states and far conditions become those warps (method geo_ar_d<step>). It beats the unguided
@@ -138,7 +136,7 @@ def render_stage(ctx) -> StageResult:
     """Every camera's every frame (frames already on disk are kept)."""
     from .scene_render import render_frames
 
-    jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in range(len(cam.frames))]
+    jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("render").frames]
     fitted = background(ctx) if ctx.shared.background_path is not None else None
     done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted)
     return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
@@ -161,7 +159,7 @@ def restore_stage(ctx) -> StageResult:
     from ..scene.ground_truth import truth_camera, with_lateral_offsets
     from ..splat.render import SplatRenderer
 
-    m, opts = ctx.manifest, ctx.options
+    m, opts, decision = ctx.manifest, ctx.options, ctx.plan.stage("restore")
     g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
     render = SplatRenderer(g)  # one parameter conversion for scoring, chains and the remaining views
     plain = f"ar_d{opts.ar_step:g}" if opts.ar_step > 0 else "single_view"
@@ -178,24 +176,24 @@ def restore_stage(ctx) -> StageResult:
         return warpers.get(cam.name)
 
     default = ("geo_" if warper(truth_camera(m)) else "") + plain
-    offsets = m.effects.lateral_offsets if opts.offsets is None else list(opts.offsets)
+    offsets, scored_frames = decision.offsets, ctx.plan.window  # scoring: every truth frame in the window
     done: set[tuple[str, int, float]] = set()
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
     metrics = {}
     if ctx.plan.runs("evaluate") and has_lateral_truth(m):
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
-        res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=opts.frames,
+        res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=scored_frames,
                                       progress=ctx.progress, warper=warpers.get(truth_camera(m).name),
                                       render=render)
-        metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", opts.frames, render=render) + res.rows
+        metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", scored_frames, render=render) + res.rows
         ctx.shared.restored = list(res.views[default])
         cam_name = truth_camera(m).name
         chains = {(cam_name, fi): chain for fi, chain in res.chains.items()}
         for v in ctx.shared.restored:
             write_image(ctx.tree.frame("restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
             done.add((cam_name, v.frame, round(v.offset_m, 6)))
-    jobs = [(cam, fi, off) for cam in m.cameras for fi in (opts.frames or range(len(cam.frames)))
+    jobs = [(cam, fi, off) for cam in m.cameras for fi in decision.frames
             for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
         path = ctx.tree.frame("restore", f"{cam.name}/{off:+g}", fi)
@@ -212,20 +210,27 @@ def restore_stage(ctx) -> StageResult:
 
 @stage("refine")
 def refine_stage(ctx) -> StageResult:
-    """Fine-tune the background on the recorded views plus the restored lateral views."""
+    """Fine-tune the background on the recorded views plus the restored lateral views. A refined
+    PLY already in the folder (a run that stopped after refining) is reused, not refitted."""
     from ..diffusion.refine import RefineConfig, refine_gaussians
-    from ..io.ply import write_splats
+    from ..io.ply import read_splats, write_splats
     from ..optim.evaluate import evaluate_lateral
 
-    refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
-                                      RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
-                                      progress=ctx.progress)
-    write_splats(ctx.tree.path("refine", "background.ply"), refined)
+    path = ctx.tree.path("refine", "background.ply")
+    if path.exists():
+        refined, details = read_splats(path), {"reused": True}
+    else:
+        refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
+                                          RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
+                                          progress=ctx.progress)
+        write_splats(path, refined)
+        # The loop's own time is part of the stage's row "seconds".
+        details = {k: v for k, v in stats.items() if isinstance(v, (int, float)) and k not in ("seconds", "iters")}
     metrics = {}
+    offsets = {round(o, 6) for o in ctx.plan.stage("restore").offsets}
     if ctx.plan.runs("evaluate") and has_lateral_truth(ctx.manifest):
-        metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.options.frames)
-                              if ctx.options.offsets is None or r["offset_m"] in ctx.options.offsets]
-    details = {k: v for k, v in stats.items() if isinstance(v, (int, float))}
+        metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.plan.window)
+                              if round(r["offset_m"], 6) in offsets]
     return StageResult({"iterations": ctx.options.refine_iters, **details}, metrics)
 
 

@@ -3,6 +3,7 @@
 import json
 
 from symdrive_core.io.ply import write_splats
+from symdrive_core.pipeline.plan import PlanOptions
 from symdrive_core.pipeline.run import run_scene
 from symdrive_core.pipeline.stages import StageOptions
 from tests.conftest import random_gaussians
@@ -16,11 +17,13 @@ def _stage(report, name):
 def test_other_stage_options_are_not_served_from_the_cache(tmp_path):
     pkg = write_package(tmp_path / "pkg")
     out = tmp_path / "out"
-    run_scene(pkg, out, progress=False, stage_options=StageOptions(frames=[0]))
-    again = run_scene(pkg, out, progress=False, stage_options=StageOptions(frames=[0]))
+    run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=1))
+    again = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=1))
     assert not _stage(again, "render")["ran"] and "cached" in _stage(again, "render")["reason"]
-    other = run_scene(pkg, out, progress=False, stage_options=StageOptions(frames=[0, 1], samples=2))
-    assert _stage(other, "render")["ran"] and _stage(other, "render")["frames_rendered"] == 2
+    other = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=2))
+    assert _stage(other, "render")["ran"] and _stage(other, "render")["frames_rendered"] == 1
+    window = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0, 1]))
+    assert _stage(window, "render")["ran"] and _stage(window, "render")["frames_rendered"] == 2
 
 
 def test_a_package_under_a_folder_named_output_sees_its_assets_change(tmp_path):

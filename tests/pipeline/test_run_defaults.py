@@ -1,0 +1,94 @@
+"""``symdrive run PACKAGE`` with no options on a package with lateral offsets and recorded images:
+every stage end to end (refinement on), a window of frames and offsets, and a re-run after a
+failed stage that reuses what was finished."""
+
+import json
+
+import pytest
+
+from symdrive_core.cli import main
+from symdrive_core.io.images import write_image
+from symdrive_core.io.ply import read_splats, write_splats
+from symdrive_core.pipeline import stages
+from symdrive_core.scene.camera import CameraView
+from symdrive_core.splat.render import SplatRenderer
+from tests.conftest import manifest_dict, random_gaussians
+
+
+@pytest.fixture
+def recorded_package(tmp_path):
+    """Three frames with recorded images (the background's own renders), offsets +-1 m, an inserted
+    car harmonized and fine-tuned: every stage of the default plan has work."""
+    root = tmp_path / "pkg"
+    (root / "images").mkdir(parents=True)
+    d = manifest_dict(n_frames=3, lateral=(-1.0, 1.0), harmonize=True)
+    d["effects"]["finetune"] = True
+    background = random_gaussians(200, 0, 1, (10, 0, 1), 3.0)
+    write_splats(root / "background.ply", background)
+    write_splats(root / "car_0.ply", random_gaussians(50, 1, 10, spread=0.8))
+    render = SplatRenderer(background)
+    cam = d["cameras"][0]
+    for i, f in enumerate(cam["frames"]):
+        view = CameraView(f["world_to_camera"], f["K"], cam["width"], cam["height"])
+        write_image(root / "images" / f"{i:06d}.png", render(view))
+        f["image"] = f"images/{i:06d}.png"
+    (root / "manifest.json").write_text(json.dumps(d))
+    return root
+
+
+def _stages(out):
+    return {s["name"]: s for s in json.loads((out / "report.json").read_text())["stages"]}
+
+
+def test_default_run_runs_every_stage(recorded_package, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(recorded_package), "--out", str(out), "--quiet"]) == 0
+    ran = {name for name, s in _stages(out).items() if s["ran"]}
+    assert {"render", "restore", "refine", "harmonize", "finetune"} <= ran
+    refine = _stages(out)["refine"]
+    assert refine["seconds"] > 0 and refine["iterations"] == stages.StageOptions.refine_iters
+    assert len(read_splats(out / "refine" / "background.ply")) > 0
+    assert sorted(p.name for p in (out / "restore" / "front").iterdir()) == ["+1", "-1"]
+    assert "ran  refine" in capsys.readouterr().out
+
+
+def test_window_of_frames_and_offsets_on_both_sides(recorded_package, tmp_path):
+    out = tmp_path / "out"
+    assert main(["run", str(recorded_package), "--out", str(out), "--quiet", "--no-refine",
+                 "--frames", "1", "--offsets", "0.5"]) == 0
+    assert sorted(p.relative_to(out).as_posix() for p in (out / "restore").rglob("*.png")) == [
+        "restore/front/+0.5/000001.png", "restore/front/-0.5/000001.png"]
+    assert sorted(p.name for p in (out / "render" / "front").glob("*.png")) == ["000001.png"]
+    report = _stages(out)
+    assert report["render"]["frames_rendered"] == 1
+    assert "-0.5, 0.5 m requested on the command line" in report["restore"]["reason"]
+
+
+def test_a_frame_outside_the_package_is_one_line_and_exit_2(recorded_package, tmp_path, capsys):
+    assert main(["run", str(recorded_package), "--out", str(tmp_path / "out"), "--frames", "0,7"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "manifest.json" in err and "frame 7" in err
+    assert not (tmp_path / "out" / "report.json").exists()
+
+
+def test_rerun_after_a_failed_stage_reuses_finished_work(recorded_package, tmp_path, monkeypatch):
+    out = tmp_path / "out"
+
+    def broken(ctx):
+        raise RuntimeError("harmonizer failed")
+
+    monkeypatch.setitem(stages.STAGE_RUNNERS, "harmonize", broken)
+    with pytest.raises(RuntimeError):
+        main(["run", str(recorded_package), "--out", str(out), "--quiet"])
+    monkeypatch.undo()
+    restored = {p: p.stat().st_mtime_ns for p in (out / "restore").rglob("*.png")}
+    assert len(restored) == 6 and (out / "refine" / "background.ply").exists()
+
+    def refit(*args, **kwargs):
+        raise AssertionError("the refined reconstruction on disk should have been reused")
+
+    monkeypatch.setattr("symdrive_core.diffusion.refine.refine_gaussians", refit)
+    assert main(["run", str(recorded_package), "--out", str(out), "--quiet"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (out / "restore").rglob("*.png")} == restored
+    report = _stages(out)
+    assert report["refine"]["ran"] and report["refine"]["reused"] and report["harmonize"]["ran"]
