@@ -82,11 +82,10 @@ def _plan(args) -> int:
 
 
 def _run(args) -> int:
+    from ..conventions import both_sides
     from ..pipeline.plan import PlanOptions
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
-
-    from ..conventions import both_sides
 
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
     options = PlanOptions(refine=not args.no_refine, frames=args.frames,
