@@ -81,7 +81,7 @@ def _check_images(g: Grouped) -> None:
 
 def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
     """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
-    summary (frames, cameras, transform, where the images are, whether the package reads files
+    summary (frames, cameras, transform, the ground fit's quality, whether the package reads files
     outside itself). ``progress`` shows a bar over the images (copying thousands takes a while)."""
     from tqdm import tqdm
 
@@ -98,7 +98,7 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
             raise InputError(out, "a scene package is already there; pass --force to replace it", "--out")
     g = src.grouped
     _check_images(g)
-    c2ws = np.stack([v.c2w for row in g.table for v in row])
+    c2ws = np.stack([np.stack([v.c2w for v in row]) for row in g.table])  # [camera, frame, 4, 4]
     pts = None
     if src.points is not None and len(src.points):
         pts = src.points
@@ -158,4 +158,4 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
         check_files(m)
     return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
             "scale": record["scale"], "camera_height_m": record["camera_height_m"],
-            "external_images": external, "transform": T}
+            "ground_fit": record["ground_fit"], "external_images": external, "transform": T}
