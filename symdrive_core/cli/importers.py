@@ -75,13 +75,16 @@ def _options(args, copy_images: bool = False):
 def _triangulate(src, opt) -> None:
     """A source without points or splats gets points triangulated from its images (poses fixed);
     one without images too can still be placed by --up and --camera-height alone."""
+    from ..errors import InputError
     from ..importers.triangulate import triangulate
 
     if src.points is not None or src.splats is not None:
         return
-    if opt.up is not None and opt.camera_height is not None and any(v.image is None for r in src.grouped.table
-                                                                      for v in r):
-        return
+    if any(v.image is None for row in src.grouped.table for v in row):
+        if opt.up is not None and opt.camera_height is not None:
+            return
+        raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
+                         "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
     t0 = time.perf_counter()
     tri = triangulate(src.grouped, opt.out)
     src.points, src.colors = tri.points, tri.colors
@@ -106,8 +109,8 @@ def _finish(src, args, t0, copy_images: bool = False) -> int:
               f"({q['inlier_fraction']:.0%}), residual RMS {100 * q['residual_rms_m']:.1f} cm, camera height "
               f"spread {100 * q['camera_height_spread_m']:.1f} cm")
     if q["weak"]:
-        print(f"warning: weak ground fit: {'; '.join(q['weak'])}; check the package's ground or pass --up and "
-              "--camera-height (with --scale for metric poses)", file=sys.stderr)
+        print(f"warning: weak ground fit: {'; '.join(q['weak'])} (--up and --camera-height, with --scale for "
+              "metric poses, place the ground without the fit)", file=sys.stderr)
     if info["external_images"]:
         print("note: the images stay outside the package; symdrive validate/run need --allow-external-assets "
               "(or import again with --copy-images)")

@@ -283,5 +283,5 @@ def alignment(ground: Ground | None, c2ws, *, camera_height: float | None = None
         q["fitted_camera_height_m"] = fitted_height * float(scale)
         if abs(fitted_height / h_src - 1) > cfg.weak_height_mismatch:
             q["weak"].append(f"the ground was placed {h_src * scale:.3f} m below the cameras, the fitted plane is "
-                             f"{q['fitted_camera_height_m']:.3f} m below them (check --scale and --camera-height)")
+                             f"{q['fitted_camera_height_m']:.3f} m below them: check --scale")
     return T, record

@@ -51,8 +51,6 @@ def _layout(grouped: Grouped, folder: Path) -> dict[str, tuple]:
     names = {}
     for cam, row in zip(grouped.cameras, grouped.table):
         for fi, v in enumerate(row):
-            if v.image is None:
-                raise InputError(v.source, "no recorded image to triangulate points from (pass --images)", v.where)
             name = f"{fi:06d}/{cam}{v.image.suffix.lower()}"
             link_or_copy(v.image, folder / name)
             names[name] = (v, np.asarray(v.K, dtype=np.float64))
