@@ -109,8 +109,9 @@ def _finish(src, args, t0, copy_images: bool = False) -> int:
               f"({q['inlier_fraction']:.0%}), residual RMS {100 * q['residual_rms_m']:.1f} cm, camera height "
               f"spread {100 * q['camera_height_spread_m']:.1f} cm")
     if q["weak"]:
-        print(f"warning: weak ground fit: {'; '.join(q['weak'])} (--up and --camera-height, with --scale for "
-              "metric poses, place the ground without the fit)", file=sys.stderr)
+        placed = opt.up is not None and opt.camera_height is not None and opt.scale is not None
+        print(f"warning: weak ground fit: {'; '.join(q['weak'])}" + ("" if placed else " (--up, --camera-height "
+              "and --scale place the ground without the fit)"), file=sys.stderr)
     if info["external_images"]:
         print("note: the images stay outside the package; symdrive validate/run need --allow-external-assets "
               "(or import again with --copy-images)")

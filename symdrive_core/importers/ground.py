@@ -285,3 +285,23 @@ def alignment(ground: Ground | None, c2ws, *, camera_height: float | None = None
             q["weak"].append(f"the ground was placed {h_src * scale:.3f} m below the cameras, the fitted plane is "
                              f"{q['fitted_camera_height_m']:.3f} m below them: check --scale")
     return T, record
+
+
+def align(points, c2ws, *, camera_height: float | None = None, scale: float | None = None, up=None,
+          cfg: GroundConfig = DEFAULT) -> tuple[np.ndarray, dict]:
+    """The importers' one entry: fit the ground to ``points`` (None: no points) and align (see
+    :func:`alignment`). With ``up``, ``camera_height`` and ``scale`` all given the ground is placed
+    whatever the points say, so a fit that fails (a poses-only drive's few triangulated road
+    points) is reported, not fatal."""
+    ground, failure = None, None
+    if points is not None and len(points):
+        try:
+            ground = fit_ground(points, c2ws, up=up, cfg=cfg)
+        except AlignmentError as exc:
+            if up is None or camera_height is None or scale is None:
+                raise
+            failure = str(exc).split(";")[0]
+    T, record = alignment(ground, c2ws, camera_height=camera_height, scale=scale, up=up, cfg=cfg)
+    if failure:
+        record["ground_fit"]["weak"].append(f"{failure} (the ground was placed by --up, --camera-height and --scale)")
+    return T, record

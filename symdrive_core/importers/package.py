@@ -16,7 +16,7 @@ from ..gaussians import Gaussians
 from ..io import link_or_copy
 from ..scene import is_inside
 from .frames import Grouped, split_heldout
-from .ground import alignment, fit_ground
+from .ground import align
 from .similarity import apply_camera, apply_points, transform_gaussians
 
 
@@ -104,8 +104,7 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
         pts = src.points
     elif src.splats is not None and len(src.splats):
         pts = src.splats.means
-    ground = fit_ground(pts, c2ws, up=opt.up) if pts is not None else None
-    T, record = alignment(ground, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
+    T, record = align(pts, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
     name = opt.name or out.resolve().name
     external = False
     bar = tqdm(total=sum(len(row) for row in g.table), desc="import", unit="image", disable=not progress)
