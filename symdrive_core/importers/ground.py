@@ -160,27 +160,35 @@ def _road_depth(depth: np.ndarray) -> float:
     return float(np.exp(0.5 * (edges[k] + edges[k + 1])))
 
 
+def _plane(P: np.ndarray, w: np.ndarray, normal: np.ndarray | None, path_cov: np.ndarray, up0: np.ndarray,
+           cfg: GroundConfig) -> tuple[np.ndarray, float]:
+    """Weighted least-squares plane through ``P`` with the camera path's constant-height term
+    (``normal`` given: only the offset is fitted)."""
+    mu = (w @ P) / w.sum()
+    if normal is None:
+        rel = P - mu
+        cov = (w[:, None] * rel).T @ rel / w.sum() + cfg.path_weight * path_cov
+        normal = np.linalg.eigh(cov)[1][:, 0]
+        normal = normal if normal @ up0 >= 0 else -normal
+    return normal, -float(normal @ mu)
+
+
 def _irls(P: np.ndarray, n: np.ndarray, d: float, scale_ref: float, path_cov: np.ndarray, up0: np.ndarray,
           fixed_normal: bool, cfg: GroundConfig) -> tuple[np.ndarray, float, np.ndarray]:
-    """Tukey-weighted plane (see the module docstring); returns the normal, offset and inlier mask."""
-    inl = np.ones(len(P), bool)
+    """Tukey-weighted plane (see the module docstring); returns the normal, offset and inlier mask.
+    The robust scale is the median absolute residual of the last round's inliers (first: the points
+    within 2 % of the camera height of the starting plane), so it holds when most points under the
+    path are not road."""
+    inl = np.abs(P @ n + d) < 0.02 * scale_ref
     for _ in range(cfg.iterations):
         e = P @ n + d
-        sigma = max(1.4826 * float(np.median(np.abs(e))), cfg.min_sigma * scale_ref)
+        sigma = max(1.4826 * float(np.median(np.abs(e[inl]))) if inl.any() else 0.0, cfg.min_sigma * scale_ref)
         c = cfg.tukey_c * sigma
         inl = np.abs(e) < c
         w = np.where(inl, (1.0 - (e / c) ** 2) ** 2, 0.0)
         if w.sum() <= 0:
             break
-        mu = (w @ P) / w.sum()
-        if not fixed_normal:
-            rel = P - mu
-            cov = (w[:, None] * rel).T @ rel / w.sum() + cfg.path_weight * path_cov
-            n_new = np.linalg.eigh(cov)[1][:, 0]
-            n_new = n_new if n_new @ up0 >= 0 else -n_new
-        else:
-            n_new = n
-        d_new = -float(n_new @ mu)
+        n_new, d_new = _plane(P, w, n if fixed_normal else None, path_cov, up0, cfg)
         done = np.linalg.norm(n_new - n) < 1e-12 and abs(d_new - d) < 1e-12 * scale_ref
         n, d = n_new, d_new
         if done:
@@ -207,10 +215,10 @@ def fit_ground(points, c2ws, *, up=None, cfg: GroundConfig = DEFAULT) -> Ground:
         if cand.sum() < 3:
             raise AlignmentError(f"no ground plane: {int(cand.sum())} points under the camera path; " + UP_HELP)
         P = points[cand]
-        if L == 0.0:
+        if L == 0.0:  # start: the plane through the points at the road's depth below the path
             L = _road_depth(depth[cand])
-            band = np.abs(np.log(depth[cand] / L)) < 0.02
-            d = -float(np.median(P[band] @ n))
+            band = (np.abs(np.log(depth[cand] / L)) < 0.02).astype(np.float64)
+            n, d = _plane(P, band, up0 if up is not None else None, path_cov, up0, cfg)
         n, d, inl = _irls(P, n, d, L, path_cov, up0, up is not None, cfg)
         L = float(np.median(centers @ n + d))
         if not L > 0:

@@ -117,3 +117,20 @@ def test_without_points_up_and_camera_height_place_the_ground():
     assert rec["scale"] == 1.0 and abs(np.median(z) - 1.65) < 1e-9
     with pytest.raises(AlignmentError, match="--up"):
         alignment(None, cams, camera_height=1.65)
+
+
+def test_mostly_clutter_under_the_path_still_finds_the_road(tmp_path):
+    """A queue of vehicles in the lane puts more points under the path than the road has: the
+    start at the road's depth and the inliers' robust scale keep the plane on the road, and the
+    low share of points on it is reported."""
+    from .curved_street import CAMERA_HEIGHT, LANE, _arc, curved_world
+
+    world, _ = curved_world(tmp_path, seed=4)
+    rng = np.random.default_rng(4)
+    phi = rng.uniform(0, 1.2, 600)
+    queue = np.column_stack([_arc(phi, LANE + rng.uniform(-0.9, 0.9, 600)), rng.uniform(0.1, 1.4, 600)])
+    pts = np.concatenate([world.points, apply_points(world.S, queue)])
+    _, rec = alignment(fit_ground(pts, world.c2w), world.c2w, camera_height=CAMERA_HEIGHT)
+    assert abs(rec["scale"] - 1) < 0.005, rec
+    q = rec["ground_fit"]
+    assert q["inlier_fraction"] < 0.3 and any("points under the path on it" in w for w in q["weak"]), q
