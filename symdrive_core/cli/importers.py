@@ -86,12 +86,13 @@ def _triangulate(src, opt) -> None:
         raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
                          "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
     t0 = time.perf_counter()
+    n = sum(len(row) for row in src.grouped.table)
+    print(f"no points in the source: triangulating them from {n} images with the poses fixed", flush=True)
     tri = triangulate(src.grouped, opt.out)
     src.points, src.colors = tri.points, tri.colors
     src.notes["triangulated"] = tri.record
-    print(f"no points in the source: triangulated {tri.record['points']} from {tri.record['images']} images with "
-          f"the poses fixed ({tri.record['mean_reprojection_error_px']:.2f} px mean reprojection error, "
-          f"{time.perf_counter() - t0:.1f} s)")
+    print(f"triangulated {tri.record['points']} points ({tri.record['mean_reprojection_error_px']:.2f} px mean "
+          f"reprojection error, {time.perf_counter() - t0:.1f} s)")
 
 
 def _finish(src, args, t0, copy_images: bool = False) -> int:

@@ -11,19 +11,22 @@ up, parked cars, facades) lies beside it. So:
 1. **Corridor.** Only points under the path count: below it, and horizontally no farther from
    the camera path (a polyline per camera) than ``corridor`` times their depth below it. That
    cone keeps the road ahead and drops car bodies, facades and most of the kerb, in any units.
-2. **Start.** The densest depth in the corridor (a 1 % histogram of log depth) is the road.
+2. **Start.** The densest depth in the corridor (a 1 % histogram of log depth) is the road; the
+   first plane goes through the points at that depth.
 3. **Robust least squares (IRLS, Tukey's biweight).** The plane minimises the points' weighted
    squared heights plus ``path_weight`` times the cameras' squared height deviations from their
    mean, per camera: the camera path constrains the normal along the drive (and across it, on a
-   curved drive) where a street's few road points would let it tip. Weights are redone from the
-   residuals' median absolute deviation each round, so a kerb 15 cm up or a dip does not pull.
+   curved drive) where a street's few road points would let it tip. Weights are redone each
+   round from the median absolute residual of the last round's inliers, so a kerb 15 cm up, a
+   dip, or a lane full of vehicles (more points under the path than the road has) does not pull.
    A given ``up`` fixes the normal; only the plane's height is fitted.
 
 The fit records its quality (points in the corridor, inliers, residual RMS, the spread of the
 cameras' heights) and says when it is weak. :func:`alignment` maps the source frame to the
 package's world: the plane becomes ``z = 0`` with +Z up, the first camera stands over the origin
 looking along +X (yaw and ground position are not observable), and the scale comes from the
-cameras' height above that plane (``camera_height``) or is given.
+cameras' height above that plane (``camera_height``) or is given. :func:`align` (fit, then
+align) is what the importers call.
 """
 
 from __future__ import annotations

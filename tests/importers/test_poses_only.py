@@ -55,6 +55,7 @@ def test_poses_only_demo_street_triangulates_and_reconstructs(tmp_path, capsys):
                  "--copy-images", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "triangulated" in out
+    assert not list(tmp_path.glob(".pkg.*")), "the triangulation's work folder is removed"
     m = load_manifest(pkg)
     tri = m.source["triangulated"]
     assert tri["points"] >= 300 and tri["images"] == 30 and tri["mean_reprojection_error_px"] < 1.0, tri
