@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
@@ -13,10 +14,10 @@ def _common(p, images: bool) -> None:
         p.add_argument("--images", help="folder of the recorded images (paths in the model are relative to it)")
     p.add_argument("--out", required=True, help="scene package folder to write (written whole, or not at all)")
     p.add_argument("--splats", help="trained 3DGS splat PLY in the same frame as the cameras")
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--camera-height", type=float,
-                   help="the cameras' height above the ground in metres (sets the metric scale)")
-    g.add_argument("--scale", type=float, help="metres per source unit (instead of --camera-height)")
+    p.add_argument("--camera-height", type=float,
+                   help="the cameras' height above the ground in metres: sets the metric scale from the fitted "
+                        "ground, or with --scale (or without points) places the ground that far below the cameras")
+    p.add_argument("--scale", type=float, help="metres per source unit (--scale 1: the poses are metric)")
     p.add_argument("--up", help="the world's up direction x,y,z in the source frame (default: fitted ground "
                                 "plane, checked against the cameras' mean up vector)")
     p.add_argument("--heldout-every", type=positive_int, metavar="N",
@@ -71,13 +72,47 @@ def _options(args, copy_images: bool = False):
                    heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 
 
+def _triangulate(src, opt) -> None:
+    """A source without points or splats gets points triangulated from its images (poses fixed);
+    one without images too can still be placed by --up and --camera-height alone."""
+    from ..errors import InputError
+    from ..importers.triangulate import triangulate
+
+    if src.points is not None or src.splats is not None:
+        return
+    if any(v.image is None for row in src.grouped.table for v in row):
+        if opt.up is not None and opt.camera_height is not None:
+            return
+        raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
+                         "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
+    t0 = time.perf_counter()
+    n = sum(len(row) for row in src.grouped.table)
+    print(f"no points in the source: triangulating them from {n} images with the poses fixed", flush=True)
+    tri = triangulate(src.grouped, opt.out)
+    src.points, src.colors = tri.points, tri.colors
+    src.notes["triangulated"] = tri.record
+    print(f"triangulated {tri.record['points']} points ({tri.record['mean_reprojection_error_px']:.2f} px mean "
+          f"reprojection error, {time.perf_counter() - t0:.1f} s)")
+
+
 def _finish(src, args, t0, copy_images: bool = False) -> int:
     from ..importers.package import write_package
 
-    info = write_package(src, _options(args, copy_images), progress=not args.quiet)
+    opt = _options(args, copy_images)
+    _triangulate(src, opt)
+    info = write_package(src, opt, progress=not args.quiet)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")
+    q = info["ground_fit"]
+    if q["corridor_points"]:
+        print(f"ground: {q['inliers']} of {q['corridor_points']} points under the camera path on the plane "
+              f"({q['inlier_fraction']:.0%}), residual RMS {100 * q['residual_rms_m']:.1f} cm, camera height "
+              f"spread {100 * q['camera_height_spread_m']:.1f} cm")
+    if q["weak"]:
+        placed = opt.up is not None and opt.camera_height is not None and opt.scale is not None
+        print(f"warning: weak ground fit: {'; '.join(q['weak'])}" + ("" if placed else " (--up, --camera-height "
+              "and --scale place the ground without the fit)"), file=sys.stderr)
     if info["external_images"]:
         print("note: the images stay outside the package; symdrive validate/run need --allow-external-assets "
               "(or import again with --copy-images)")

@@ -14,8 +14,8 @@ Depth of the ground from the model, not from the reconstruction's render: render
 wiggles, and the lane line with it. The source frames' depth is the package's recorded depth
 (``cameras[].frames[].depth``, OpenCV z-depth, 0 = sky, as LiDAR gives) where it has it, else
 the reconstruction's rendered depth with a looser tolerance. The ground model is one plane per
-window of frames along the camera path, each fitted by :func:`~..importers.ground.fit_ground`'s
-RANSAC on the package's points (``background.points``) or the splat centres; a ray takes the
+window of frames along the camera path, each fitted by :func:`~..importers.ground.fit_ground` to
+the package's points (``background.points``) or the splat centres; a ray takes the
 plane of the window whose anchor camera is nearest to where it meets the ground.
 """
 

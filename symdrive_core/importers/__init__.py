@@ -3,6 +3,7 @@ scene packages in a metric, Z-up world (``symdrive import colmap|nerfstudio|3dgs
 
 One module per idea: :mod:`.colmap`, :mod:`.nerfstudio`, :mod:`.gs_trainer` read their formats
 into :class:`~.frames.View` records; :mod:`.frames` groups them into cameras and frames;
+:mod:`.triangulate` triangulates points from the images of a drive that has none (poses fixed);
 :mod:`.ground` finds the ground plane and the similarity to a metric Z-up world;
 :mod:`.similarity` applies it to cameras and splats (SH colours rotated); :mod:`.package` writes
 the package atomically.

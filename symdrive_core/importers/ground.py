@@ -1,13 +1,32 @@
 """A metric, Z-up world from an arbitrary SfM frame: the ground plane under the camera path.
 
-The ground is fitted by RANSAC on the reconstruction's points (sparse SfM points or splat
-centres) near the camera path and below the cameras. A street has more than one plane (kerbs and
-sidewalks a few centimetres higher, facades, car roofs), so a candidate plane must be within
-``max_tilt_deg`` of the cameras' mean up vector, lie below every camera, and is scored by its
-inliers weighted by closeness to the path rather than by its size alone. The result maps the
-source frame to the package's world: the plane becomes ``z = 0`` with +Z up, the first camera
-stands over the origin looking along +X (yaw and ground position are not observable), and the
-scale comes from the cameras' height above that plane (``camera_height``) or is given.
+One fit serves every importer, so the same cameras and points give the same plane whatever frame
+or order they come in. It is deterministic (no random sampling) and every threshold is relative
+to the cameras' height above the road, so it is unchanged by a similarity of its input.
+
+Why this model. A car's cameras ride at a near-constant height over the road, and the road is
+what lies right under their path; the rest of a street (kerbs and sidewalks a few centimetres
+up, parked cars, facades) lies beside it. So:
+
+1. **Corridor.** Only points under the path count: below it, and horizontally no farther from
+   the camera path (a polyline per camera) than ``corridor`` times their depth below it. That
+   cone keeps the road ahead and drops car bodies, facades and most of the kerb, in any units.
+2. **Start.** The densest depth in the corridor (a 1 % histogram of log depth) is the road; the
+   first plane goes through the points at that depth.
+3. **Robust least squares (IRLS, Tukey's biweight).** The plane minimises the points' weighted
+   squared heights plus ``path_weight`` times the cameras' squared height deviations from their
+   mean, per camera: the camera path constrains the normal along the drive (and across it, on a
+   curved drive) where a street's few road points would let it tip. Weights are redone each
+   round from the median absolute residual of the last round's inliers, so a kerb 15 cm up, a
+   dip, or a lane full of vehicles (more points under the path than the road has) does not pull.
+   A given ``up`` fixes the normal; only the plane's height is fitted.
+
+The fit records its quality (points in the corridor, inliers, residual RMS, the spread of the
+cameras' heights) and says when it is weak. :func:`alignment` maps the source frame to the
+package's world: the plane becomes ``z = 0`` with +Z up, the first camera stands over the origin
+looking along +X (yaw and ground position are not observable), and the scale comes from the
+cameras' height above that plane (``camera_height``) or is given. :func:`align` (fit, then
+align) is what the importers call.
 """
 
 from __future__ import annotations
@@ -19,12 +38,32 @@ import numpy as np
 from ..errors import SymDriveError
 from .similarity import make_similarity
 
-UP_HELP = ("pass --up x,y,z (the world's up direction in the source frame) and --scale S "
-           "(metres per source unit)")
+UP_HELP = ("pass --up x,y,z (the world's up direction in the source frame) and --camera-height H "
+           "(the ground H metres below the cameras; --scale S too when the poses are not metric)")
 
 
 class AlignmentError(SymDriveError):
     """No usable ground plane (or cameras below it): one line saying what to pass instead."""
+
+
+@dataclass(frozen=True)
+class GroundConfig:
+    corridor: float = 1.0  # a point is under the path within this times its depth below it, horizontally
+    path_weight: float = 1.0  # the cameras' constant-height term against the points' (both mean squares)
+    max_tilt_deg: float = 30.0  # the plane's normal within this of the cameras' mean up vector
+    tukey_c: float = 4.685  # biweight cut-off in robust standard deviations (95 % efficiency)
+    min_sigma: float = 1e-3  # floor of the residuals' robust scale, in camera heights
+    iterations: int = 50
+    max_segments: int = 256  # per camera path (longer paths are thinned evenly)
+    # A fit is weak below these (reported in the manifest and as a warning line).
+    weak_inliers: int = 50
+    weak_inlier_fraction: float = 0.3
+    weak_residual_rms: float = 0.02  # in camera heights
+    weak_height_spread: float = 0.03  # the cameras' height standard deviation, in camera heights
+    weak_height_mismatch: float = 0.05  # a placed ground (--camera-height with --scale) this far from the fitted
+
+
+DEFAULT = GroundConfig()
 
 
 @dataclass
@@ -33,14 +72,36 @@ class Ground:
     offset: float  # plane: normal . x + offset = 0
     inliers: int
     camera_heights: np.ndarray  # source units, per camera, above the plane
+    corridor_points: int = 0  # points under the path the plane was fitted to
+    residual_rms: float = 0.0  # of the inliers, source units
 
     def height(self, points) -> np.ndarray:
         return np.asarray(points, dtype=np.float64) @ self.normal + self.offset
 
+    def quality(self, scale: float, cfg: GroundConfig = DEFAULT) -> dict:
+        """The fit's numbers in metres (``scale``: metres per source unit) and why it is weak, if it is."""
+        h = float(np.median(self.camera_heights))
+        spread = float(np.std(self.camera_heights))
+        q = {"corridor_points": self.corridor_points, "inliers": self.inliers,
+             "inlier_fraction": round(self.inliers / max(self.corridor_points, 1), 4),
+             "residual_rms_m": self.residual_rms * scale, "camera_height_spread_m": spread * scale}
+        weak = []
+        if self.corridor_points:
+            if self.inliers < cfg.weak_inliers:
+                weak.append(f"only {self.inliers} points on the plane")
+            if q["inlier_fraction"] < cfg.weak_inlier_fraction:
+                weak.append(f"{q['inlier_fraction']:.0%} of the points under the path on it")
+            if self.residual_rms > cfg.weak_residual_rms * h:
+                weak.append(f"residual RMS {self.residual_rms / h:.1%} of the camera height")
+        if spread > cfg.weak_height_spread * h:
+            weak.append(f"camera heights spread {spread / h:.1%} (a sloped or uneven road?)")
+        q["weak"] = weak
+        return q
+
 
 def camera_up_vectors(c2ws: np.ndarray) -> np.ndarray:
     """World up of OpenCV cameras (their -y axis), [N, 3]."""
-    return -np.asarray(c2ws)[:, :3, 1]
+    return -np.asarray(c2ws)[..., :3, 1].reshape(-1, 3)
 
 
 def _unit(v) -> np.ndarray:
@@ -51,96 +112,130 @@ def _unit(v) -> np.ndarray:
     return v / n
 
 
-def _near_path(points: np.ndarray, centers: np.ndarray, up: np.ndarray, max_points: int, rng) -> tuple:
-    """Per point (subsampled): height below its horizontally nearest camera, horizontal distance."""
-    if len(points) > max_points:
-        points = points[rng.choice(len(points), max_points, replace=False)]
-    if len(centers) > 200:
-        centers = centers[np.linspace(0, len(centers) - 1, 200).round().astype(int)]
-    best_r = np.full(len(points), np.inf)
-    best_h = np.zeros(len(points))
-    for s in range(0, len(points), 4096):
-        p = points[s:s + 4096]
-        rel = p[:, None, :] - centers[None]
-        v = rel @ up
-        r = np.linalg.norm(rel - v[..., None] * up, axis=-1)
-        j = np.argmin(r, axis=1)
-        idx = np.arange(len(p))
-        best_r[s:s + 4096] = r[idx, j]
-        best_h[s:s + 4096] = -v[idx, j]
-    return points, best_h, best_r
+def camera_paths(c2ws) -> np.ndarray:
+    """Camera centres as paths [C, F, 3]: ``c2ws`` is one camera's [F, 4, 4] or a rig's [C, F, 4, 4]."""
+    c2ws = np.asarray(c2ws, dtype=np.float64)
+    return c2ws[..., :3, 3].reshape(-1, c2ws.shape[-3], 3)
 
 
-def fit_ground(points, c2ws, *, up=None, max_tilt_deg: float = 30.0, iterations: int = 600,
-               seed: int = 0, max_points: int = 60000) -> Ground:
+def path_scatter(paths: np.ndarray) -> np.ndarray:
+    """Mean squared deviation of each camera's centres from their mean, averaged over cameras (3x3)."""
+    rel = paths - paths.mean(axis=1, keepdims=True)
+    return np.einsum("cfi,cfj->ij", rel, rel) / (paths.shape[0] * paths.shape[1])
+
+
+def under_path(points: np.ndarray, paths: np.ndarray, up: np.ndarray, max_segments: int,
+               chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: horizontal distance to the nearest camera path segment, and depth below it there."""
+    starts, ends = [], []
+    for c in paths:
+        if len(c) > max_segments + 1:
+            c = c[np.linspace(0, len(c) - 1, max_segments + 1).round().astype(int)]
+        starts.append(c[:-1] if len(c) > 1 else c)
+        ends.append(c[1:] if len(c) > 1 else c)
+    a, b = np.concatenate(starts), np.concatenate(ends)
+    ab = b - a
+    ab_h = ab - np.outer(ab @ up, up)
+    len2 = np.maximum(np.einsum("ij,ij->i", ab_h, ab_h), 1e-300)
+    r = np.empty(len(points))
+    depth = np.empty(len(points))
+    for s in range(0, len(points), chunk):
+        rel = points[s:s + chunk, None, :] - a[None]  # [n, S, 3]
+        rel_h = rel - (rel @ up)[..., None] * up
+        t = np.clip(np.einsum("nsi,si->ns", rel_h, ab_h) / len2, 0.0, 1.0)
+        off = rel_h - t[..., None] * ab_h
+        dist = np.linalg.norm(off, axis=-1)
+        j = np.argmin(dist, axis=1)
+        idx = np.arange(len(j))
+        r[s:s + chunk] = dist[idx, j]
+        depth[s:s + chunk] = t[idx, j] * (ab[j] @ up) - rel[idx, j] @ up
+    return r, depth
+
+
+def _road_depth(depth: np.ndarray) -> float:
+    """The densest depth (1 % bins of log depth, smoothed over five bins): the road under the path."""
+    logd = np.log(depth)
+    lo, hi = logd.min(), logd.max()
+    bins = max(int(np.ceil((hi - lo) / 0.01)), 1)
+    counts, edges = np.histogram(logd, bins=bins, range=(lo, lo + bins * 0.01))
+    smooth = np.convolve(counts, np.ones(5), mode="same")
+    k = int(np.argmax(smooth))
+    return float(np.exp(0.5 * (edges[k] + edges[k + 1])))
+
+
+def _plane(P: np.ndarray, w: np.ndarray, normal: np.ndarray | None, path_cov: np.ndarray, up0: np.ndarray,
+           cfg: GroundConfig) -> tuple[np.ndarray, float]:
+    """Weighted least-squares plane through ``P`` with the camera path's constant-height term
+    (``normal`` given: only the offset is fitted)."""
+    mu = (w @ P) / w.sum()
+    if normal is None:
+        rel = P - mu
+        cov = (w[:, None] * rel).T @ rel / w.sum() + cfg.path_weight * path_cov
+        normal = np.linalg.eigh(cov)[1][:, 0]
+        normal = normal if normal @ up0 >= 0 else -normal
+    return normal, -float(normal @ mu)
+
+
+def _irls(P: np.ndarray, n: np.ndarray, d: float, scale_ref: float, path_cov: np.ndarray, up0: np.ndarray,
+          fixed_normal: bool, cfg: GroundConfig) -> tuple[np.ndarray, float, np.ndarray]:
+    """Tukey-weighted plane (see the module docstring); returns the normal, offset and inlier mask.
+    The robust scale is the median absolute residual of the last round's inliers (first: the points
+    within 2 % of the camera height of the starting plane), so it holds when most points under the
+    path are not road."""
+    inl = np.abs(P @ n + d) < 0.02 * scale_ref
+    for _ in range(cfg.iterations):
+        e = P @ n + d
+        sigma = max(1.4826 * float(np.median(np.abs(e[inl]))) if inl.any() else 0.0, cfg.min_sigma * scale_ref)
+        c = cfg.tukey_c * sigma
+        inl = np.abs(e) < c
+        w = np.where(inl, (1.0 - (e / c) ** 2) ** 2, 0.0)
+        if w.sum() <= 0:
+            break
+        n_new, d_new = _plane(P, w, n if fixed_normal else None, path_cov, up0, cfg)
+        done = np.linalg.norm(n_new - n) < 1e-12 and abs(d_new - d) < 1e-12 * scale_ref
+        n, d = n_new, d_new
+        if done:
+            break
+    return n, d, inl
+
+
+def fit_ground(points, c2ws, *, up=None, cfg: GroundConfig = DEFAULT) -> Ground:
     """The ground plane under the cameras (see the module docstring); :class:`AlignmentError` if
-    there is none. ``up``: the source frame's up direction, when known (fixes the normal)."""
+    there is none. ``c2ws``: [F, 4, 4] or a rig's [C, F, 4, 4]; ``up``: the source frame's up
+    direction, when known (fixes the normal)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     points = points[np.isfinite(points).all(1)]
-    c2ws = np.asarray(c2ws, dtype=np.float64)
-    centers = c2ws[:, :3, 3]
-    rng = np.random.default_rng(seed)
+    paths = camera_paths(c2ws)
+    centers = paths.reshape(-1, 3)
     up0 = _unit(up) if up is not None else _unit(camera_up_vectors(c2ws).mean(0))
     if len(points) < 3:
         raise AlignmentError(f"no ground plane: {len(points)} points to fit it to; " + UP_HELP)
-    pts, h, r = _near_path(points, centers, up0, max_points, rng)
-    below = h > 0
-    if below.sum() < 3:
-        raise AlignmentError("no ground plane: no points below the cameras; " + UP_HELP)
-    # Rough camera height: points below the cameras and horizontally near them.
-    near = below & (r <= np.median(r[below]))
-    L = float(np.median(h[near])) if near.any() else float(np.median(h[below]))
-    cand = below & (r < 4.0 * L)
-    if cand.sum() < 3:
-        cand = below
-    P, rP = pts[cand], r[cand]
-    weight = np.exp(-(rP / (2.0 * L)) ** 2)
-    tau = 0.02 * L
-    cos_tilt = np.cos(np.deg2rad(max_tilt_deg))
-    best = None
-    for _ in range(iterations):
-        if up is not None:
-            n = up0
-            d = -float(P[rng.integers(len(P))] @ n)
-        else:
-            a, b, c = P[rng.choice(len(P), 3, replace=False)]
-            n = np.cross(b - a, c - a)
-            norm = np.linalg.norm(n)
-            if norm < 1e-12:
-                continue
-            n = n / norm
-            if n @ up0 < 0:
-                n = -n
-            if n @ up0 < cos_tilt:
-                continue
-            d = -float(n @ a)
-        if np.any(centers @ n + d <= 0):
-            continue
-        inl = np.abs(P @ n + d) < tau
-        score = float(weight[inl].sum())
-        if best is None or score > best[0]:
-            best = (score, n, d)
-    if best is None:
-        raise AlignmentError(f"no ground plane within {max_tilt_deg:g} degrees of the cameras' up vector "
-                             "with every camera above it; " + UP_HELP)
-    _, n, d = best
-    for _ in range(3):  # refine on the inliers by least squares (the normal kept when it is given)
-        inl = np.abs(P @ n + d) < tau
-        Q = P[inl]
-        if len(Q) < 3:
+    n, d, L = up0, 0.0, 0.0
+    path_cov = path_scatter(paths)
+    for _ in range(2):  # the corridor again under the fitted plane's up
+        r, depth = under_path(points, paths, n, cfg.max_segments)
+        cand = (depth > 0) & (r <= cfg.corridor * depth)
+        if cand.sum() < 3:
+            raise AlignmentError(f"no ground plane: {int(cand.sum())} points under the camera path; " + UP_HELP)
+        P = points[cand]
+        if L == 0.0:  # start: the plane through the points at the road's depth below the path
+            L = _road_depth(depth[cand])
+            band = (np.abs(np.log(depth[cand] / L)) < 0.02).astype(np.float64)
+            n, d = _plane(P, band, up0 if up is not None else None, path_cov, up0, cfg)
+        n, d, inl = _irls(P, n, d, L, path_cov, up0, up is not None, cfg)
+        L = float(np.median(centers @ n + d))
+        if not L > 0:
             break
-        c = Q.mean(0)
-        if up is None:
-            _, _, vt = np.linalg.svd(Q - c, full_matrices=False)
-            n2 = vt[-1] if vt[-1] @ n > 0 else -vt[-1]
-            if n2 @ up0 >= cos_tilt:
-                n = n2
-        d = -float(n @ c)
+    if np.degrees(np.arccos(np.clip(n @ up0, -1.0, 1.0))) > cfg.max_tilt_deg:
+        raise AlignmentError(f"no ground plane within {cfg.max_tilt_deg:g} degrees of the cameras' up vector; "
+                             + UP_HELP)
     heights = centers @ n + d
     if np.any(heights <= 0):
         raise AlignmentError(f"{int((heights <= 0).sum())} of {len(heights)} cameras are below the fitted "
                              "ground plane; " + UP_HELP)
-    return Ground(n, d, int((np.abs(P @ n + d) < tau).sum()), heights)
+    e = P[inl] @ n + d
+    return Ground(n, d, int(inl.sum()), heights, corridor_points=len(P),
+                  residual_rms=float(np.sqrt(np.mean(e ** 2))) if len(e) else 0.0)
 
 
 def rotation_to_z(n: np.ndarray, forward: np.ndarray) -> np.ndarray:
@@ -158,32 +253,66 @@ def rotation_to_z(n: np.ndarray, forward: np.ndarray) -> np.ndarray:
 
 
 def alignment(ground: Ground | None, c2ws, *, camera_height: float | None = None, scale: float | None = None,
-              up=None) -> tuple[np.ndarray, dict]:
+              up=None, cfg: GroundConfig = DEFAULT) -> tuple[np.ndarray, dict]:
     """The similarity (4x4) from the source frame to the package world, and a record of how it
-    was found. Either ``camera_height`` (metres: the cameras' median height above the ground)
-    or ``scale`` (metres per source unit) sets the scale; neither: 1."""
+    was found (``ground_fit``: the fit's quality; empty ``weak`` when it is sound).
+
+    The scale is ``scale`` (metres per source unit) when given, else ``camera_height`` (metres)
+    over the fitted plane's median camera height, else 1 (poses taken as metric). With a known
+    scale, ``camera_height`` places the plane: the ground is that far below the cameras' median
+    height (its normal still fitted, or ``up``); without points that needs ``up``."""
     c2ws = np.asarray(c2ws, dtype=np.float64)
-    centers = c2ws[:, :3, 3]
+    centers = camera_paths(c2ws).reshape(-1, 3)
+    fitted_height = None
     if ground is None:
-        if up is None:
-            raise AlignmentError("no ground plane and no up direction; " + UP_HELP)
+        if up is None or camera_height is None:
+            raise AlignmentError("no points to fit the ground plane to; " + UP_HELP)
         n = _unit(up)
-        if scale is None:
-            raise AlignmentError("without a ground plane the scale cannot come from --camera-height; " + UP_HELP)
-        # Without points: the ground lies camera_height (metres) below the lowest camera.
-        below = (camera_height or 0.0) / scale
-        d = -float((centers @ n).min()) + below
-        heights = centers @ n + d
-        ground = Ground(n, d, 0, heights)
-    h_src = float(np.median(ground.camera_heights))
-    if scale is None:
-        scale = 1.0 if camera_height is None else float(camera_height) / h_src
+        ground = Ground(n, 0.0, 0, centers @ n)
+    else:
+        fitted_height = float(np.median(ground.camera_heights))
+    if scale is None and camera_height is not None and fitted_height:
+        scale = float(camera_height) / fitted_height
+    else:
+        scale = 1.0 if scale is None else float(scale)
+        if camera_height is not None:  # the ground camera_height below the cameras' median height
+            shift = float(camera_height) / scale - float(np.median(ground.camera_heights))
+            ground = Ground(ground.normal, ground.offset + shift, ground.inliers, ground.camera_heights + shift,
+                            ground.corridor_points, ground.residual_rms)
     if not np.isfinite(scale) or scale <= 0:
         raise AlignmentError(f"scale {scale} is not a positive number")
-    R = rotation_to_z(ground.normal, c2ws[0][:3, 2])
-    foot = centers[0] - (centers[0] @ ground.normal + ground.offset) * ground.normal
+    h_src = float(np.median(ground.camera_heights))
+    R = rotation_to_z(ground.normal, c2ws.reshape(-1, 4, 4)[0][:3, 2])
+    c0 = centers[0]
+    foot = c0 - (c0 @ ground.normal + ground.offset) * ground.normal
     T = make_similarity(scale, R, -scale * R @ foot)
     record = {"ground_normal": ground.normal.tolist(), "ground_offset": float(ground.offset),
-              "ground_inliers": ground.inliers, "camera_height_source_units": h_src,
-              "scale": float(scale), "camera_height_m": h_src * float(scale)}
+              "camera_height_source_units": h_src, "scale": float(scale), "camera_height_m": h_src * float(scale),
+              "ground_fit": ground.quality(float(scale), cfg)}
+    if fitted_height is not None:
+        q = record["ground_fit"]
+        q["fitted_camera_height_m"] = fitted_height * float(scale)
+        if abs(fitted_height / h_src - 1) > cfg.weak_height_mismatch:
+            q["weak"].append(f"the ground was placed {h_src * scale:.3f} m below the cameras, the fitted plane is "
+                             f"{q['fitted_camera_height_m']:.3f} m below them: check --scale")
+    return T, record
+
+
+def align(points, c2ws, *, camera_height: float | None = None, scale: float | None = None, up=None,
+          cfg: GroundConfig = DEFAULT) -> tuple[np.ndarray, dict]:
+    """The importers' one entry: fit the ground to ``points`` (None: no points) and align (see
+    :func:`alignment`). With ``up``, ``camera_height`` and ``scale`` all given the ground is placed
+    whatever the points say, so a fit that fails (a poses-only drive's few triangulated road
+    points) is reported, not fatal."""
+    ground, failure = None, None
+    if points is not None and len(points):
+        try:
+            ground = fit_ground(points, c2ws, up=up, cfg=cfg)
+        except AlignmentError as exc:
+            if up is None or camera_height is None or scale is None:
+                raise
+            failure = str(exc).split(";")[0]
+    T, record = alignment(ground, c2ws, camera_height=camera_height, scale=scale, up=up, cfg=cfg)
+    if failure:
+        record["ground_fit"]["weak"].append(f"{failure} (the ground was placed by --up, --camera-height and --scale)")
     return T, record

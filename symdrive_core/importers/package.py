@@ -16,7 +16,7 @@ from ..gaussians import Gaussians
 from ..io import link_or_copy
 from ..scene import is_inside
 from .frames import Grouped, split_heldout
-from .ground import alignment, fit_ground
+from .ground import align
 from .similarity import apply_camera, apply_points, transform_gaussians
 
 
@@ -81,7 +81,7 @@ def _check_images(g: Grouped) -> None:
 
 def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
     """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
-    summary (frames, cameras, transform, where the images are, whether the package reads files
+    summary (frames, cameras, transform, the ground fit's quality, whether the package reads files
     outside itself). ``progress`` shows a bar over the images (copying thousands takes a while)."""
     from tqdm import tqdm
 
@@ -98,14 +98,13 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
             raise InputError(out, "a scene package is already there; pass --force to replace it", "--out")
     g = src.grouped
     _check_images(g)
-    c2ws = np.stack([v.c2w for row in g.table for v in row])
+    c2ws = np.stack([np.stack([v.c2w for v in row]) for row in g.table])  # [camera, frame, 4, 4]
     pts = None
     if src.points is not None and len(src.points):
         pts = src.points
     elif src.splats is not None and len(src.splats):
         pts = src.splats.means
-    ground = fit_ground(pts, c2ws, up=opt.up) if pts is not None else None
-    T, record = alignment(ground, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
+    T, record = align(pts, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
     name = opt.name or out.resolve().name
     external = False
     bar = tqdm(total=sum(len(row) for row in g.table), desc="import", unit="image", disable=not progress)
@@ -158,4 +157,4 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
         check_files(m)
     return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
             "scale": record["scale"], "camera_height_m": record["camera_height_m"],
-            "external_images": external, "transform": T}
+            "ground_fit": record["ground_fit"], "external_images": external, "transform": T}

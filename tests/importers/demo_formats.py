@@ -39,7 +39,7 @@ class World:
     height: int
     c2w: np.ndarray  # [N, 4, 4] OpenCV, source frame
     c2w_demo: np.ndarray
-    splats: Gaussians
+    splats: Gaussians | None
     points: np.ndarray
     colors: np.ndarray
 
@@ -126,9 +126,10 @@ GL = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenCV camera axes <-> OpenGL camera axe
 
 
 def write_nerfstudio(world: World, folder: Path, *, applied: np.ndarray | None = None, per_frame: bool = False,
-                     timestamps: bool = False) -> Path:
+                     timestamps: bool = False, with_points: bool = True) -> Path:
     """transforms.json beside images/, poses as ``applied @ c2w_opengl`` (nerfstudio's
-    ``applied_transform`` convention), points and splats in that frame too."""
+    ``applied_transform`` convention), points and splats (when the world has them) in that frame too.
+    ``with_points=False``: poses only (no ``ply_file_path``)."""
     A = np.eye(4) if applied is None else applied
     link_images(world, folder / "images")
     intr = {"fl_x": world.K[0, 0], "fl_y": world.K[1, 1], "cx": world.K[0, 2], "cy": world.K[1, 2],
@@ -148,10 +149,12 @@ def write_nerfstudio(world: World, folder: Path, *, applied: np.ndarray | None =
         data.update(intr)
     if applied is not None:
         data["applied_transform"] = A[:3].tolist()
-    write_points(folder / "sparse_pc.ply", apply_points(A, world.points), world.colors)
-    data["ply_file_path"] = "sparse_pc.ply"
+    if with_points:
+        write_points(folder / "sparse_pc.ply", apply_points(A, world.points), world.colors)
+        data["ply_file_path"] = "sparse_pc.ply"
     (folder / "transforms.json").write_text(json.dumps(data, indent=1))
-    write_splats(folder / "splat.ply", transform_gaussians(world.splats, A))
+    if world.splats is not None:
+        write_splats(folder / "splat.ply", transform_gaussians(world.splats, A))
     return folder / "transforms.json"
 
 

@@ -53,3 +53,84 @@ def test_given_up_fixes_the_normal():
     ground = fit_ground(pts, cams, up=(0, 0, 1))
     np.testing.assert_allclose(ground.normal, [0, 0, 1])
     assert abs(np.median(ground.camera_heights) - 1.6) < 5e-3
+
+
+def _angle_deg(a, b) -> float:
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_curved_drive_one_plane_whatever_the_frame_or_order(seed, tmp_path):
+    """The fit is deterministic and every threshold is relative: a similarity of the input (scale
+    0.37) and a shuffle of the points give the same plane, mapped."""
+    from .curved_street import CAMERA_HEIGHT, curved_world
+
+    world, parts = curved_world(tmp_path, seed=seed)
+    ground = fit_ground(world.points, world.c2w)
+    true_up = world.S[:3, :3] @ [0.0, 0.0, 1.0]
+    assert _angle_deg(ground.normal, true_up) < 0.05
+    assert abs(np.median(ground.camera_heights) / CAMERA_HEIGHT - 1) < 0.005
+    rng = np.random.default_rng(seed)
+    S = make_similarity(0.37, quat_to_matrix(quat_normalize(rng.normal(size=4))), rng.normal(size=3) * 300)
+    perm = rng.permutation(len(world.points))
+    moved = fit_ground(apply_points(S, world.points[perm]), np.stack([apply_camera(S, c) for c in world.c2w]))
+    assert _angle_deg(moved.normal, S[:3, :3] @ ground.normal / 0.37) < 1e-6
+    np.testing.assert_allclose(moved.camera_heights, 0.37 * ground.camera_heights, rtol=1e-9)
+    assert moved.inliers == ground.inliers and moved.corridor_points == ground.corridor_points
+    # the kerbs, cars and facades are off the plane: the inliers are road points
+    on = np.abs(ground.height(world.points)) < 0.05
+    assert on[parts["road"]].mean() > 0.9 and on[parts["kerbs"]].mean() < 0.01 and on[parts["cars"]].mean() < 0.05
+
+
+def test_a_rough_ground_is_reported_weak():
+    rng = np.random.default_rng(3)
+    pts, cams = street(rng)
+    road = np.abs(pts[:, 1]) < 3.5
+    rough = pts.copy()
+    rough[road, 2] += rng.normal(0, 0.2, road.sum())  # 20 cm of scatter: no plane to trust
+    _, sound = alignment(fit_ground(pts, cams), cams, camera_height=1.6)
+    _, weak = alignment(fit_ground(rough, cams), cams, camera_height=1.6)
+    assert sound["ground_fit"]["weak"] == [] and sound["ground_fit"]["residual_rms_m"] < 0.01
+    assert any("residual RMS" in w for w in weak["ground_fit"]["weak"]), weak["ground_fit"]
+
+
+def test_scale_and_camera_height_place_the_ground_below_the_cameras():
+    rng = np.random.default_rng(5)
+    pts, cams = street(rng)
+    ground = fit_ground(pts, cams)
+    T, rec = alignment(ground, cams, camera_height=1.55, scale=1.0)
+    z = np.stack([apply_camera(T, c) for c in cams])[:, 2, 3]
+    assert abs(np.median(z) - 1.55) < 1e-9  # placed, not fitted: the cameras ride at 1.6 over the road
+    np.testing.assert_allclose(z, 1.55, atol=1e-3)  # the fitted normal keeps them level
+    assert rec["scale"] == 1.0 and abs(rec["ground_fit"]["fitted_camera_height_m"] - 1.6) < 5e-3
+    assert rec["ground_fit"]["weak"] == []  # 3 % off the fit: within what a stated camera height may be off
+    _, rec = alignment(ground, cams, camera_height=1.2, scale=1.0)
+    assert "fitted plane" in rec["ground_fit"]["weak"][0]
+
+
+def test_without_points_up_and_camera_height_place_the_ground():
+    rng = np.random.default_rng(6)
+    _, cams = street(rng)
+    cams[:, 2, 3] += np.linspace(0, 0.5, len(cams))  # a slope: the lowest camera is not the reference
+    T, rec = alignment(None, cams, camera_height=1.65, up=(0, 0, 1))
+    z = np.stack([apply_camera(T, c) for c in cams])[:, 2, 3]
+    assert rec["scale"] == 1.0 and abs(np.median(z) - 1.65) < 1e-9
+    with pytest.raises(AlignmentError, match="--up"):
+        alignment(None, cams, camera_height=1.65)
+
+
+def test_mostly_clutter_under_the_path_still_finds_the_road(tmp_path):
+    """A queue of vehicles in the lane puts more points under the path than the road has: the
+    start at the road's depth and the inliers' robust scale keep the plane on the road, and the
+    low share of points on it is reported."""
+    from .curved_street import CAMERA_HEIGHT, LANE, _arc, curved_world
+
+    world, _ = curved_world(tmp_path, seed=4)
+    rng = np.random.default_rng(4)
+    phi = rng.uniform(0, 1.2, 600)
+    queue = np.column_stack([_arc(phi, LANE + rng.uniform(-0.9, 0.9, 600)), rng.uniform(0.1, 1.4, 600)])
+    pts = np.concatenate([world.points, apply_points(world.S, queue)])
+    _, rec = alignment(fit_ground(pts, world.c2w), world.c2w, camera_height=CAMERA_HEIGHT)
+    assert abs(rec["scale"] - 1) < 0.005, rec
+    q = rec["ground_fit"]
+    assert q["inlier_fraction"] < 0.3 and any("points under the path on it" in w for w in q["weak"]), q

@@ -35,3 +35,22 @@ def test_source_transform_must_be_a_similarity(tmp_path, bad):
     d["source"] = {"transform": [[None if np.isnan(v) else float(v) for v in row] for row in bad]}
     with pytest.raises(ManifestError, match="source.transform"):
         parse_manifest(d, tmp_path / "manifest.json")
+
+
+def test_ground_fit_and_triangulation_records_match_the_schema(tmp_path):
+    d = manifest_dict()
+    d["source"] = {"format": "nerfstudio", "transform": np.eye(4).tolist(), "scale": 1.0,
+                   "ground_fit": {"corridor_points": 120, "inliers": 110, "inlier_fraction": 0.9167,
+                                  "residual_rms_m": 0.01, "camera_height_spread_m": 0.008, "weak": [],
+                                  "fitted_camera_height_m": 1.65},
+                   "triangulated": {"points": 700, "images": 30, "mean_track_length": 6.8,
+                                    "mean_reprojection_error_px": 0.46}}
+    m = parse_manifest(d, tmp_path / "manifest.json")
+    assert m.to_json()["source"] == d["source"]
+    d["source"]["ground_fit"]["inlier_fraction"] = 1.5
+    with pytest.raises(ManifestError, match="source.ground_fit.inlier_fraction"):
+        parse_manifest(d, tmp_path / "manifest.json")
+    d["source"]["ground_fit"]["inlier_fraction"] = 0.5
+    d["source"]["triangulated"]["points"] = -1
+    with pytest.raises(ManifestError, match="triangulated"):
+        parse_manifest(d, tmp_path / "manifest.json")
