@@ -19,6 +19,7 @@ import importlib
 import numpy as np
 
 from .bicycle import pure_pursuit_steer, world_to_ego
+from .spaces import from_physical
 
 __all__ = ["Agent", "BUILTIN", "load_agent", "pure_pursuit_steer"]
 
@@ -34,16 +35,18 @@ class Agent:
         raise NotImplementedError
 
     def command(self, accel: float, steer: float) -> np.ndarray:
-        """The action in the environment's action space: ``[accel, steer]`` clipped to the
-        limits, or, with ``action="waypoint"``, ``[x, y, speed]``: the last pure-pursuit target
-        (in the ego frame) and the speed ``accel`` reaches in one step."""
+        """The action in the environment's action space: ``[accel, steer]``, or, with
+        ``action="waypoint"``, ``[x, y, speed]``: the last pure-pursuit target (in the ego frame)
+        and the speed ``accel`` reaches in one step; clipped to the limits and scaled as the
+        space asks (:mod:`.spaces`)."""
         env = self.env
-        (alo, ahi), (slo, shi) = env.action_limits
-        accel = float(np.clip(accel, alo, ahi))
+        (alo, ahi), _ = env.action_limits
         if env.config.action == "waypoint":
             x, y = world_to_ego(env.ego, self.target)
-            return np.array([x, y, np.clip(env.ego.v + accel * env.dt, 0.0, env.config.max_speed)])
-        return np.array([accel, np.clip(steer, slo, shi)])
+            physical = [x, y, env.ego.v + float(np.clip(accel, alo, ahi)) * env.dt]
+        else:
+            physical = [accel, steer]
+        return from_physical(physical, env.config)
 
     def follow(self, s_ahead: float, lateral: float, v_target: float, gain: float = 1.0) -> tuple[float, float]:
         """Pure pursuit to the point ``s_ahead`` metres ahead of the ego's progress, ``lateral``
