@@ -23,6 +23,8 @@ def add_commands(sub) -> None:
     p.add_argument("--vehicles", type=count_int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
     p.add_argument("--action", choices=["accel_steer", "waypoint"], default="accel_steer",
                    help="the agent's action: [acceleration, steering] or [x, y, speed] (ego-frame target point)")
+    p.add_argument("--normalized-actions", action="store_true", default=None,
+                   help="the agent's actions are scaled to [-1, 1] (a speed to [0, 1]) instead of physical units")
     p.add_argument("--restore", action="store_true",
                    help="views off the recorded path go through the restorer (loads the diffusion model)")
     p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
@@ -52,6 +54,8 @@ def _sim(args) -> int:
     cfg = SimConfig(dt=args.dt, time_limit_s=args.time_limit, image_size=size, render=not args.no_render,
                     traffic=args.traffic, sumo_vehicles=args.vehicles, action=args.action,
                     restore=args.restore)
+    if args.normalized_actions is not None:
+        cfg.normalized_actions = args.normalized_actions
     try:
         from ..sim.agents import load_agent
 

@@ -48,6 +48,11 @@ class DrivableArea:
         """Lateral offset (positive = left) of lane ``k``'s middle from the centre line."""
         return -self.half_width + (k + 0.5) * self.lane_width
 
+    def summary(self) -> dict:
+        """What the episode's road was, for the report: the package's or the corridor."""
+        return {"source": "ground_truth.road" if self.road is not None else "corridor", "lanes": self.lanes,
+                "lane_width_m": self.lane_width, "half_width_m": self.half_width}
+
     def ground(self, xy: np.ndarray) -> np.ndarray:
         if self.road is not None:
             return self.road.ground_height(np.atleast_2d(xy))

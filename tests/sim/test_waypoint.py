@@ -99,3 +99,17 @@ def test_command_waypoint_action(tmp_path):
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["episodes"][0]["end_reason"] == "route_end"
     assert json.dumps(report).count('"waypoint"') >= 1
+
+
+def test_command_normalized_actions(tmp_path):
+    import json
+
+    from symdrive_core.cli import main
+
+    from .conftest import DEMO
+
+    assert main(["sim", str(DEMO), "--agent", "replay", "--action", "waypoint", "--normalized-actions", "--no-render",
+                 "--no-video", "--quiet", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["config"]["normalized_actions"] is True
+    assert report["episodes"][0]["end_reason"] == "route_end"
