@@ -120,6 +120,14 @@ class Route:
         p = self.xy[i] + (s - self.s[i]) * d
         return p + lateral * np.array([-d[1], d[0]])
 
+    def curvature(self, s: float, chord: float) -> float:
+        """Unsigned curvature (1/m) at ``s``: the turn between the chords ``chord`` metres before
+        and after, over ``chord``. Exact on a circle (equal arcs turn their chords by the arc's
+        angle), and the chord averages out the jitter of a recorded path."""
+        a, b, c = (self.point_at(u) for u in (s - chord, s, s + chord))
+        turn = np.arctan2(*(c - b)[::-1]) - np.arctan2(*(b - a)[::-1])
+        return float(abs(np.arctan2(np.sin(turn), np.cos(turn))) / chord)
+
     def heading_at(self, s: float) -> float:
         i = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))
         d = self.xy[i + 1] - self.xy[i]
