@@ -32,7 +32,8 @@ standing on the road. Each camera keeps its frame-0 offset to that pose for the 
 
 Reward: metres of progress along the route in the step (scores are computed separately by
 :mod:`.scores`). The same seed gives the same episode. Registered with Gymnasium as
-``SymDrive-v0``: ``gymnasium.make("SymDrive-v0", package=..., config=SimConfig(...))``.
+``SymDrive-v0`` (by :mod:`symdrive_core.sim`): ``gymnasium.make("symdrive_core.sim:SymDrive-v0",
+package=..., config=SimConfig(...))``.
 """
 
 from __future__ import annotations
@@ -359,6 +360,3 @@ class SymDriveEnv(gym.Env):
                 rgb = rgb + (1.0 - out["alpha"].detach().cpu().numpy()) * restored
         self.timing["render"] += time.perf_counter() - t0
         return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-
-
-gym.register(id="SymDrive-v0", entry_point=f"{__name__}:SymDriveEnv")

@@ -146,3 +146,22 @@ def test_render_follows_the_render_mode(demo):
     assert env.metadata["render_fps"] == pytest.approx(1.0 / env.unwrapped.dt)
     with pytest.raises(ValueError, match="render_mode"):
         SymDriveEnv(demo, SimConfig(render=False), render_mode="human")
+
+
+def test_gymnasium_finds_the_environment_in_a_fresh_process():
+    """Both spellings work without touching SymDriveEnv first: the id after importing the
+    package, and the module-prefixed id that makes Gymnasium import it."""
+    import subprocess
+    import sys
+
+    code = ("import gymnasium as gym\n"
+            "import {module}\n"
+            "from symdrive_core.sim.config import SimConfig\n"
+            "env = gym.make('{env_id}', package={package!r}, config=SimConfig(render=False))\n"
+            "obs, _ = env.reset(seed=0)\n"
+            "print(type(env.unwrapped).__name__, obs['state'].shape)\n")
+    for module, env_id in (("symdrive_core.sim", "SymDrive-v0"), ("symdrive_core", "symdrive_core.sim:SymDrive-v0")):
+        out = subprocess.run([sys.executable, "-c", code.format(module=module, env_id=env_id, package=str(DEMO))],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert out.stdout.strip().endswith("SymDriveEnv (6,)"), out.stdout
