@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from .bicycle import pure_pursuit_steer, world_to_ego
 from .spaces import from_physical
@@ -122,10 +123,10 @@ class IDMAgent(Agent):
         s = env.route.progress(env.ego.xy)
         b = 0.25 * self.b_comf
         reach = max(v, self.v0) ** 2 / (2.0 * b) + self.lookahead()
-        d = np.arange(0.0, reach + self.chord + 1.0, 1.0)
-        k = np.array([env.route.curvature(s + u, self.chord) for u in d])
         span = int(np.ceil(self.chord))
-        k = np.array([k[i:i + span + 1].max() for i in range(len(d))])
+        d = np.arange(0.0, reach + 1.0, 1.0)
+        k = env.route.curvature(s + np.arange(0.0, reach + 1.0 + span, 1.0), self.chord)
+        k = sliding_window_view(k, span + 1).max(axis=1)[: len(d)]
         bends = k > 0
         if not bends.any():
             return self.v0

@@ -54,6 +54,9 @@ def test_curvature_of_a_circle_and_a_line():
     arc_middle = BEFORE + 0.25 * np.pi * RADIUS
     assert route.curvature(arc_middle, 5.0) == pytest.approx(1.0 / RADIUS, rel=1e-3)
     assert route.curvature(5.0, 5.0) == pytest.approx(0.0, abs=1e-12)
+    s = np.linspace(-3.0, route.length + 3.0, 41)  # past both ends too
+    assert np.array_equal(route.curvature(s, 5.0), [route.curvature(u, 5.0) for u in s])
+    assert np.array_equal(route.point_at(s, 1.5), [route.point_at(u, 1.5) for u in s])
     # A jittered recording of the same bend: the chord averages the jitter out.
     noisy = bend(step=0.25) + np.random.default_rng(0).normal(scale=0.02, size=(len(bend(step=0.25)), 2))
     assert Route.from_path(noisy).curvature(arc_middle, 5.0) == pytest.approx(1.0 / RADIUS, rel=0.1)
