@@ -38,7 +38,8 @@ def test_full_steering_is_applied_at_the_physical_limit(demo):
     for normalized in (False, True):
         cfg = SimConfig(render=False, normalized_actions=normalized)
         env = SymDriveEnv(only_actors(demo, set()), cfg)
-        assert float(env.action_space.high[1]) != cfg.max_steer or normalized
+        if not normalized:
+            assert float(env.action_space.high[1]) > cfg.max_steer  # the float32 bound is above the limit
         env.reset(seed=0)
         env.step(env.action_space.high)
         assert env.history[-1]["steer"] == cfg.max_steer
