@@ -18,14 +18,17 @@ def add_commands(sub) -> None:
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
     p.add_argument("--dt", type=float, help="seconds per step (default: the package's frame interval)")
     p.add_argument("--time-limit", type=float, help="seconds per episode (default: twice the recorded drive)")
-    p.add_argument("--traffic", choices=["replay", "sumo"], default="replay",
+    p.add_argument("--traffic", choices=["replay", "sumo"],
                    help="actors on their recorded poses, or SUMO vehicles reacting to the ego")
-    p.add_argument("--vehicles", type=count_int, default=0, help="SUMO vehicles on the road (with --traffic sumo)")
-    p.add_argument("--action", choices=["accel_steer", "waypoint"], default="accel_steer",
+    p.add_argument("--vehicles", type=count_int, help="SUMO vehicles on the road (with --traffic sumo)")
+    p.add_argument("--action", choices=["accel_steer", "waypoint"],
                    help="the agent's action: [acceleration, steering] or [x, y, speed] (ego-frame target point)")
-    p.add_argument("--restore", action="store_true",
+    p.add_argument("--normalized-actions", action="store_true", default=None,
+                   help="the agent's actions are scaled to [-1, 1] (a speed to [0, 1]) instead of physical units")
+    p.add_argument("--restore", action="store_true", default=None,
                    help="views off the recorded path go through the restorer (loads the diffusion model)")
-    p.add_argument("--no-render", action="store_true", help="state observations only (no camera images)")
+    p.add_argument("--no-render", dest="render", action="store_false", default=None,
+                   help="state observations only (no camera images)")
     p.add_argument("--no-video", action="store_true", help="write no episode videos")
     add_quiet_option(p)
     add_external_assets_option(p)
@@ -49,9 +52,10 @@ def _sim(args) -> int:
         size = (w, h)
     if args.dt is not None and not args.dt > 0:
         raise InputError("--dt", f"expected a positive number of seconds, got {args.dt}")
-    cfg = SimConfig(dt=args.dt, time_limit_s=args.time_limit, image_size=size, render=not args.no_render,
-                    traffic=args.traffic, sumo_vehicles=args.vehicles, action=args.action,
-                    restore=args.restore)
+    given = {"dt": args.dt, "time_limit_s": args.time_limit, "image_size": size, "render": args.render,
+             "traffic": args.traffic, "sumo_vehicles": args.vehicles, "action": args.action,
+             "normalized_actions": args.normalized_actions, "restore": args.restore}
+    cfg = SimConfig(**{k: v for k, v in given.items() if v is not None})  # unset flags keep SimConfig's defaults
     try:
         from ..sim.agents import load_agent
 

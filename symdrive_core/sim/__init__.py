@@ -11,6 +11,15 @@ from .config import SimConfig
 
 __all__ = ["SimConfig", "SymDriveEnv"]
 
+try:  # Gymnasium comes with the "sim" extra; SimConfig alone does not need it
+    from gymnasium.envs.registration import register
+except ImportError:
+    pass
+else:
+    # gymnasium.make("SymDrive-v0", ...) after importing this package, or
+    # gymnasium.make("symdrive_core.sim:SymDrive-v0", ...), which imports it.
+    register(id="SymDrive-v0", entry_point="symdrive_core.sim.env:SymDriveEnv")
+
 
 def __getattr__(name):
     if name == "SymDriveEnv":

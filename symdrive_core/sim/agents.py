@@ -7,7 +7,8 @@ arguments). Built-in:
 
 * ``replay``: follows the recorded path at the recorded speed (pure pursuit + speed tracking);
 * ``idm``: the Intelligent Driver Model (Treiber, Hennecke and Helbing 2000) behind the nearest
-  vehicle ahead in its lane, and pure pursuit (Coulter 1992) along the lane's middle;
+  vehicle ahead in its lane, and pure pursuit (Coulter 1992) along the lane's middle; its desired
+  speed drops before bends so that the lateral acceleration stays within ``a_lat``;
 * ``cut-in``: an aggressive scripted lane change into the neighbouring lane one second in,
   over ``duration`` seconds, then lane keeping at constant speed.
 """
@@ -17,8 +18,10 @@ from __future__ import annotations
 import importlib
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from .bicycle import pure_pursuit_steer, world_to_ego
+from .spaces import from_physical
 
 __all__ = ["Agent", "BUILTIN", "load_agent", "pure_pursuit_steer"]
 
@@ -34,16 +37,18 @@ class Agent:
         raise NotImplementedError
 
     def command(self, accel: float, steer: float) -> np.ndarray:
-        """The action in the environment's action space: ``[accel, steer]`` clipped to the
-        limits, or, with ``action="waypoint"``, ``[x, y, speed]``: the last pure-pursuit target
-        (in the ego frame) and the speed ``accel`` reaches in one step."""
+        """The action in the environment's action space: ``[accel, steer]``, or, with
+        ``action="waypoint"``, ``[x, y, speed]``: the last pure-pursuit target (in the ego frame)
+        and the speed ``accel`` reaches in one step; clipped to the limits and scaled as the
+        space asks (:mod:`.spaces`)."""
         env = self.env
-        (alo, ahi), (slo, shi) = env.action_limits
-        accel = float(np.clip(accel, alo, ahi))
+        (alo, ahi), _ = env.action_limits
         if env.config.action == "waypoint":
             x, y = world_to_ego(env.ego, self.target)
-            return np.array([x, y, np.clip(env.ego.v + accel * env.dt, 0.0, env.config.max_speed)])
-        return np.array([accel, np.clip(steer, slo, shi)])
+            physical = [x, y, env.ego.v + float(np.clip(accel, alo, ahi)) * env.dt]
+        else:
+            physical = [accel, steer]
+        return from_physical(physical, env.config)
 
     def follow(self, s_ahead: float, lateral: float, v_target: float, gain: float = 1.0) -> tuple[float, float]:
         """Pure pursuit to the point ``s_ahead`` metres ahead of the ego's progress, ``lateral``
@@ -71,13 +76,15 @@ class ReplayAgent(Agent):
 
 
 class IDMAgent(Agent):
-    """IDM car following + pure-pursuit lane keeping in the lane it starts in."""
+    """IDM car following + pure-pursuit lane keeping in the lane it starts in, slowing for bends."""
 
     a_max = 1.5  # m/s^2
     b_comf = 2.0  # m/s^2
     time_headway = 1.5  # s
     min_gap = 2.0  # m
     delta = 4.0
+    a_lat = 2.0  # m/s^2, lateral acceleration allowed in bends
+    chord = 5.0  # m, the span over which the route's curvature is measured
 
     def reset(self, env, seed=None):
         super().reset(env, seed)
@@ -107,15 +114,40 @@ class IDMAgent(Agent):
                 best = (gap, v)
         return best
 
+    def desired_speed(self) -> float:
+        """``v0``, or less where a bend ahead asks for less: a point ``d`` metres ahead with
+        curvature k allows ``sqrt(a_lat / k + 2 b d)``, planned with ``b = b_comf / 4`` (the
+        free-road term then brakes only 10 % above it, at ``b``). Each point takes the sharpest
+        curvature within the next chord: measured over a chord, a bend's start shows half of it."""
+        env, v = self.env, self.env.ego.v
+        s = env.route.progress(env.ego.xy)
+        b = 0.25 * self.b_comf
+        reach = max(v, self.v0) ** 2 / (2.0 * b) + self.lookahead()
+        span = int(np.ceil(self.chord))
+        d = np.arange(0.0, reach + 1.0, 1.0)
+        k = env.route.curvature(s + np.arange(0.0, reach + 1.0 + span, 1.0), self.chord)
+        k = sliding_window_view(k, span + 1).max(axis=1)[: len(d)]
+        bends = k > 0
+        if not bends.any():
+            return self.v0
+        return float(max(0.1, min(self.v0, np.min(np.sqrt(self.a_lat / k[bends] + 2.0 * b * d[bends])))))
+
+    def free_road(self, v: float, v0: float) -> float:
+        """IDM's free-road acceleration; above ``v0`` the improved IDM's (Treiber and Kesting
+        2013), which brakes at most ``b_comf`` where plain IDM would brake ever harder."""
+        if v > v0:
+            return -self.b_comf * (1.0 - (v0 / v) ** (self.a_max * self.delta / self.b_comf))
+        return self.a_max * (1.0 - (v / v0) ** self.delta)
+
     def idm(self) -> float:
         v = self.env.ego.v
-        free = 1.0 - (v / self.v0) ** self.delta
+        free = self.free_road(v, self.desired_speed())
         lead = self.leader()
         if lead is None:
-            return self.a_max * free
+            return free
         gap, v_lead = lead
         s_star = self.min_gap + max(0.0, v * self.time_headway + v * (v - v_lead) / (2 * np.sqrt(self.a_max * self.b_comf)))
-        return self.a_max * (free - (s_star / max(gap, 0.1)) ** 2)
+        return free - self.a_max * (s_star / max(gap, 0.1)) ** 2
 
     def act(self, obs):
         _, steer = self.follow(self.lookahead(), self.lateral, self.env.ego.v)

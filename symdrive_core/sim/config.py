@@ -34,6 +34,10 @@ class SimConfig:
     # above) by pure pursuit and a proportional speed controller with this gain (1/s).
     action: str = "accel_steer"
     waypoint_speed_gain: float = 2.0
+    # The farthest waypoint, metres from the ego box's centre along x and along y.
+    waypoint_reach_m: float = 100.0
+    # Actions scaled to [-1, 1] (a speed to [0, 1]) instead of physical units; see spaces.py.
+    normalized_actions: bool = False
     # Road: without ground_truth.road, a corridor this wide each side of the recorded path.
     corridor_half_width_m: float = 3.5
     # Off-road when any footprint corner lies this far beyond the road's edge.

@@ -7,7 +7,9 @@ Observation (a dict):
   pose for the current time). Left out when ``config.render`` is False.
 * ``state``: float32 ``[speed m/s, heading rad (world), heading relative to the route rad,
   offset from the lane's middle m (positive = left), lane index from the right, progress along
-  the route m]``.
+  the route m]``, each inside the bounds the observation space declares (:mod:`.spaces`). The
+  lane offset is clipped to the road's half-width plus half a lane: the ego's centre would have
+  to be a half road-width beyond the edge, which ends the episode first.
 
 Action (``config.action``):
 
@@ -19,14 +21,19 @@ Action (``config.action``):
   the built-in agents steer with, and proportional speed control) turns it into acceleration and
   steering, clipped to the same limits, for the same bicycle model.
 
-A NaN or out-of-range action ends the episode with reason ``invalid_action``.
+With ``config.normalized_actions`` both take entries in [-1, 1] instead (:mod:`.spaces`). An
+action is valid exactly when ``action_space`` contains it (compared in the space's float32);
+anything else (NaN, out of range, the wrong length) ends the episode with reason
+``invalid_action``.
 
 The ego: at frame 0 the reference camera (the package's ``ground_truth.camera`` or its first)
 gives the ego pose: its ground point moved back ``camera_ahead_m`` along the recorded heading,
 standing on the road. Each camera keeps its frame-0 offset to that pose for the whole episode.
 
 Reward: metres of progress along the route in the step (scores are computed separately by
-:mod:`.scores`). The same seed gives the same episode.
+:mod:`.scores`). The same seed gives the same episode. Registered with Gymnasium as
+``SymDrive-v0`` (by :mod:`symdrive_core.sim`): ``gymnasium.make("symdrive_core.sim:SymDrive-v0",
+package=..., config=SimConfig(...))``.
 """
 
 from __future__ import annotations
@@ -42,6 +49,7 @@ from .. import conventions
 from ..scene import Manifest, load_manifest
 from ..scene.ground_truth import truth_camera
 from . import episode as ep
+from . import spaces as sim_spaces
 from .bicycle import EgoState, step, waypoint_control
 from .config import SimConfig
 from .road import Route, drivable_area
@@ -60,7 +68,10 @@ class SymDriveEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"]}
 
     def __init__(self, package: str | Path | Manifest, config: SimConfig | None = None, *,
-                 allow_external_assets: bool = False):
+                 allow_external_assets: bool = False, render_mode: str | None = None):
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode: expected one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
         self.config = cfg = config or SimConfig()
         self.manifest = m = package if isinstance(package, Manifest) else load_manifest(
             package, allow_external=allow_external_assets)
@@ -69,6 +80,7 @@ class SymDriveEnv(gym.Env):
         self.dt = float(cfg.dt if cfg.dt is not None else (np.median(np.diff(times)) if len(times) > 1 else 0.1))
         if not self.dt > 0:
             raise ValueError(f"dt must be positive, got {self.dt}")
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.dt}
         duration = float(times[-1] - times[0])
         self.time_limit = float(cfg.time_limit_s if cfg.time_limit_s is not None
                                 else max(cfg.time_limit_factor * duration, 10 * self.dt))
@@ -106,16 +118,9 @@ class SymDriveEnv(gym.Env):
             from .restore import OnlineRestorer
 
             self.restorer = OnlineRestorer(self)
-        limits = self.action_limits
-        if cfg.action == "accel_steer":
-            self.action_space = spaces.Box(np.array([limits[0][0], limits[1][0]], dtype=np.float32),
-                                           np.array([limits[0][1], limits[1][1]], dtype=np.float32))
-        elif cfg.action == "waypoint":
-            self.action_space = spaces.Box(np.array([-np.inf, -np.inf, 0.0], dtype=np.float32),
-                                           np.array([np.inf, np.inf, cfg.max_speed], dtype=np.float32))
-        else:
-            raise ValueError(f"action: expected 'accel_steer' or 'waypoint', got {cfg.action!r}")
-        obs = {"state": spaces.Box(-np.inf, np.inf, (6,), np.float32)}
+        self.action_space = sim_spaces.action_space(cfg)
+        self.lane_offset_bound = self.area.half_width + 0.5 * self.area.lane_width
+        obs = {"state": sim_spaces.state_space(self.route.length, self.area.lanes, self.lane_offset_bound, cfg)}
         if cfg.render:
             obs["images"] = spaces.Dict({c.name: spaces.Box(0, 255, (*self.image_size(c)[::-1], 3), np.uint8)
                                          for c in self.cameras})
@@ -174,7 +179,7 @@ class SymDriveEnv(gym.Env):
         self.seed_value = seed
         self.t = float(self.times[0])
         self.steps = 0
-        v0 = float(self.recorded_speed[0])
+        v0 = min(float(self.recorded_speed[0]), self.config.max_speed)
         self.ego = EgoState(float(self.recorded_xy[0, 0]), float(self.recorded_xy[0, 1]),
                             float(self.recorded_yaw[0]), v0)
         self.timing = {"render": 0.0, "restore": 0.0, "traffic": 0.0, "physics": 0.0}
@@ -193,18 +198,16 @@ class SymDriveEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         if self.end_reason is not None:
             raise RuntimeError(f"the episode has ended ({self.end_reason}); call reset()")
-        if self.config.action == "waypoint":
-            problem = ep.check_waypoint(action, self.config.max_speed)
-            if problem is not None:
-                return self.end(ep.INVALID_ACTION, problem)
-            x, y, v = (float(u) for u in np.asarray(action, dtype=np.float64).reshape(-1))
-            a, delta = waypoint_control(self.ego, (x, y), v, self.config.wheelbase_m,
-                                        self.config.waypoint_speed_gain, self.action_limits)
+        cfg = self.config
+        problem = sim_spaces.check_action(action, self.action_space, sim_spaces.NAMES[cfg.action])
+        if problem is not None:
+            return self.end(ep.INVALID_ACTION, problem)
+        u = sim_spaces.to_physical(np.asarray(action, dtype=np.float64).reshape(-1), cfg)
+        if cfg.action == "waypoint":
+            a, delta = waypoint_control(self.ego, u[:2], float(u[2]), cfg.wheelbase_m, cfg.waypoint_speed_gain,
+                                        self.action_limits)
         else:
-            problem = ep.check_action(action, self.action_limits)
-            if problem is not None:
-                return self.end(ep.INVALID_ACTION, problem)
-            a, delta = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
+            a, delta = float(u[0]), float(u[1])
         t0 = time.perf_counter()
         before = self.route.progress(self.ego.xy)
         self.ego = step(self.ego, a, delta, self.dt, self.config.wheelbase_m, self.config.max_speed)
@@ -239,6 +242,10 @@ class SymDriveEnv(gym.Env):
         return self._observation(render=False), 0.0, True, False, self._info()
 
     def render(self):
+        """The first camera's view (``render_mode="rgb_array"``); None without a render mode, as
+        Gymnasium specifies."""
+        if self.render_mode is None:
+            return None
         return self.render_camera(self.cameras[0].name)
 
     def close(self):
@@ -287,7 +294,8 @@ class SymDriveEnv(gym.Env):
         e, h = self.ego, self.history[-1]
         rel = e.yaw - self.route.heading_at(h["progress"])
         rel = float(np.arctan2(np.sin(rel), np.cos(rel)))
-        return np.array([e.v, e.yaw, rel, h["lane_offset"], h["lane"], h["progress"]], dtype=np.float32)
+        lane_offset = float(np.clip(h["lane_offset"], -self.lane_offset_bound, self.lane_offset_bound))
+        return np.array([e.v, e.yaw, rel, lane_offset, h["lane"], h["progress"]], dtype=np.float32)
 
     def _observation(self, render: bool = True) -> dict:
         obs = {"state": self._state()}

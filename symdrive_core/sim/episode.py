@@ -38,34 +38,3 @@ def collisions(ego_rect: np.ndarray, centres: np.ndarray, yaws: np.ndarray, wlhs
     gaps = np.empty(len(centres))
     gaps[j[mine] - 1] = gap[mine]
     return np.flatnonzero(gaps < 0), gaps
-
-
-def check_action(action, limits: tuple[tuple[float, float], tuple[float, float]]) -> str | None:
-    """None for a valid [acceleration, steering]; else what is wrong with it."""
-    try:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        return f"not a pair of numbers: {action!r}"
-    if a.shape != (2,):
-        return f"expected [acceleration, steering], got {a.size} values"
-    if not np.all(np.isfinite(a)):
-        return f"not finite: {a.tolist()}"
-    for v, (lo, hi), name in zip(a, limits, ("acceleration", "steering")):
-        if not lo - 1e-9 <= v <= hi + 1e-9:
-            return f"{name} {v:g} outside [{lo:g}, {hi:g}]"
-    return None
-
-
-def check_waypoint(action, max_speed: float) -> str | None:
-    """None for a valid waypoint action [x, y, speed]; else what is wrong with it."""
-    try:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        return f"not three numbers: {action!r}"
-    if a.shape != (3,):
-        return f"expected [x, y, speed], got {a.size} values"
-    if not np.all(np.isfinite(a)):
-        return f"not finite: {a.tolist()}"
-    if not -1e-9 <= a[2] <= max_speed + 1e-9:
-        return f"speed {a[2]:g} outside [0, {max_speed:g}]"
-    return None

@@ -48,6 +48,11 @@ class DrivableArea:
         """Lateral offset (positive = left) of lane ``k``'s middle from the centre line."""
         return -self.half_width + (k + 0.5) * self.lane_width
 
+    def summary(self) -> dict:
+        """What the episode's road was, for the report: the package's or the corridor."""
+        return {"source": "ground_truth.road" if self.road is not None else "corridor", "lanes": self.lanes,
+                "lane_width_m": self.lane_width, "half_width_m": self.half_width}
+
     def ground(self, xy: np.ndarray) -> np.ndarray:
         if self.road is not None:
             return self.road.ground_height(np.atleast_2d(xy))
@@ -105,15 +110,26 @@ class Route:
         _, u, seg = project_onto(self.xy, np.asarray(xy, dtype=np.float64)[None])
         return float(self.s[seg[0]] + u[0] * (self.s[seg[0] + 1] - self.s[seg[0]]))
 
-    def point_at(self, s: float, lateral: float = 0.0) -> np.ndarray:
+    def point_at(self, s, lateral: float = 0.0) -> np.ndarray:
         """The point ``s`` metres along the route (extended straight past its ends), moved
-        ``lateral`` metres to the left."""
-        i = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))
+        ``lateral`` metres to the left: [2] for a number, [N, 2] for N arc lengths."""
+        u = np.asarray(s, dtype=np.float64)
+        i = np.clip(np.searchsorted(self.s, u) - 1, 0, len(self.s) - 2)
         d = self.xy[i + 1] - self.xy[i]
-        seg = np.linalg.norm(d)
-        d = d / seg
-        p = self.xy[i] + (s - self.s[i]) * d
-        return p + lateral * np.array([-d[1], d[0]])
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        p = self.xy[i] + (u - self.s[i])[..., None] * d
+        return p + lateral * np.stack([-d[..., 1], d[..., 0]], axis=-1)
+
+    def curvature(self, s, chord: float):
+        """Unsigned curvature (1/m) at ``s`` (a number or an array): the turn between the chords
+        ``chord`` metres before and after, over ``chord``. Exact on a circle (equal arcs turn
+        their chords by the arc's angle), and the chord averages out a recorded path's jitter."""
+        u = np.asarray(s, dtype=np.float64)
+        a, b, c = self.point_at(u - chord), self.point_at(u), self.point_at(u + chord)
+        h1 = np.arctan2(b[..., 1] - a[..., 1], b[..., 0] - a[..., 0])
+        h2 = np.arctan2(c[..., 1] - b[..., 1], c[..., 0] - b[..., 0])
+        k = np.abs(np.arctan2(np.sin(h2 - h1), np.cos(h2 - h1))) / chord
+        return float(k) if k.ndim == 0 else k
 
     def heading_at(self, s: float) -> float:
         i = int(np.clip(np.searchsorted(self.s, s) - 1, 0, len(self.s) - 2))

@@ -113,6 +113,7 @@ def run(package, agent: str, episodes: int, seed: int, out: str | Path, config: 
         env.close()
     report = {"package": str(env.manifest.path or env.manifest.root), "agent": agent, "episodes": records,
               "summary": summarize(records), "seed": seed, "dt": env.dt, "route_length_m": env.route.length,
+              "drivable_area": env.area.summary(),
               "config": replace(config).to_json(), "invocation": invocation}
     write_text_atomic(out / "report.json", json.dumps(report, indent=1, default=float) + "\n")
     return report

@@ -116,12 +116,15 @@ def test_drive_into_parked_car_collides_at_the_right_step(demo):
 
 def _corners_overlap(a, b):
     """Independent overlap test for two convex quads: a corner inside the other, or crossing edges."""
+    def cross2(u, v):  # written out: numpy 2 refuses np.cross on 2-vectors
+        return u[0] * v[1] - u[1] * v[0]
+
     def inside(p, poly):
-        s = [np.cross(poly[(i + 1) % 4] - poly[i], p - poly[i]) for i in range(4)]
+        s = [cross2(poly[(i + 1) % 4] - poly[i], p - poly[i]) for i in range(4)]
         return all(v > 1e-9 for v in s) or all(v < -1e-9 for v in s)
 
     def cross(p1, p2, q1, q2):
-        d = lambda a, b, c: np.cross(b - a, c - a)
+        d = lambda a, b, c: cross2(b - a, c - a)
         return (d(p1, p2, q1) * d(p1, p2, q2) < 0) and (d(q1, q2, p1) * d(q1, q2, p2) < 0)
 
     return (any(inside(p, b) for p in a) or any(inside(p, a) for p in b)

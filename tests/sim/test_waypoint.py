@@ -99,3 +99,20 @@ def test_command_waypoint_action(tmp_path):
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["episodes"][0]["end_reason"] == "route_end"
     assert json.dumps(report).count('"waypoint"') >= 1
+
+
+def test_command_normalized_actions(tmp_path):
+    import json
+
+    from symdrive_core.cli import main
+
+    from .conftest import DEMO
+
+    assert main(["sim", str(DEMO), "--agent", "replay", "--action", "waypoint", "--normalized-actions", "--no-render",
+                 "--no-video", "--quiet", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["config"]["normalized_actions"] is True and report["config"]["render"] is False
+    # Flags not given keep SimConfig's values.
+    defaults = SimConfig().to_json()
+    assert all(report["config"][k] == defaults[k] for k in ("traffic", "sumo_vehicles", "restore", "dt"))
+    assert report["episodes"][0]["end_reason"] == "route_end"
