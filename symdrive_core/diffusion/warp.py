@@ -14,10 +14,11 @@ Depth of the ground from the model, not from the reconstruction's render: render
 wiggles, and the lane line with it. The source frames' depth is the package's recorded depth
 (``cameras[].frames[].depth``, decoded by :mod:`..scene.depth`) at the pixels it measured, the
 reconstruction's rendered depth with a looser tolerance at the pixels it did not (all of them
-where a frame has no depth; most of them with sparse LiDAR depth); sky is never ground. The ground model is one plane per
-window of frames along the camera path, each fitted by :func:`~..importers.ground.fit_ground`'s
-RANSAC on the package's points (``background.points``) or the splat centres; a ray takes the
-plane of the window whose anchor camera is nearest to where it meets the ground.
+where a frame has no depth; most of them with sparse LiDAR depth); sky is never ground. The
+ground model is one plane per window of frames along the camera path, each fitted by
+:func:`~..importers.ground.fit_ground`'s RANSAC on the package's points (``background.points``)
+or the splat centres; a ray takes the plane of the window whose anchor camera is nearest to where
+it meets the ground.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from .frames import natural_key
 SCAN_SUFFIXES = (".bin", ".npz", ".ply")
 DEPTH_FOLDER = "lidar_depth"
 MAX_SCAN_BYTES = 1 << 30  # a 128-beam scan is tens of MB; this stops a hostile file, not a real one
-_KITTI_KEYS = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:(.*)$")
+_KEYED_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:(.*)$")
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,8 @@ def _npz_points(path: Path) -> np.ndarray:
     try:
         with np.load(path, allow_pickle=False) as z:
             if "points" not in z.files:
-                raise InputError(path, f"no 'points' array (has: {', '.join(z.files) or 'nothing'})", "points")
+                has = ", ".join(z.files) or "nothing"
+                raise InputError(path, f"no 'points' array (has: {has})", "points")
             points = z["points"]
     except (ValueError, OSError, zipfile.BadZipFile) as exc:
         raise InputError(path, f"not a readable .npz: {exc}", "points") from None
@@ -92,7 +93,7 @@ def read_sensor_to_camera(path: Path) -> np.ndarray:
     text = path.read_text(encoding="utf-8", errors="replace")
     keyed = {}
     for line in text.splitlines():
-        m = _KITTI_KEYS.match(line)
+        m = _KEYED_LINE.match(line)
         if m:
             keyed[m.group(1)] = m.group(2)
 

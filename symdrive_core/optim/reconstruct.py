@@ -3,8 +3,9 @@
 Kerbl et al.'s recipe at small scale: Gaussians initialised from the package's coloured point
 cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can explain them),
 trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the package's depth
-maps, at measured pixels only: sparse LiDAR depth supervises where it has returns), Adam with per-parameter learning rates and an exponentially decaying position rate,
-SH degree raised step by step, clone/split/prune density control. Every k-th frame of the
+maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
+with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
+step by step, clone/split/prune density control. Every k-th frame of the
 drive is held out for evaluation. Checkpoints are a splat PLY plus the optimizer state in
 safetensors, so ``--resume`` continues exactly where a run stopped.
 """
