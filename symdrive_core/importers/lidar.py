@@ -184,6 +184,8 @@ def import_lidar(package, scans_dir, sensor_to_camera: np.ndarray, *, camera: st
     folder = m.root / DEPTH_FOLDER / cam.name
     if not is_inside(folder.parent, m.root):
         raise InputError(where, f"{DEPTH_FOLDER}/ leads outside the package (a symlink)", DEPTH_FOLDER)
+    if folder.parent.exists() and not folder.parent.is_dir():
+        raise InputError(folder.parent, "is a file; the depth maps go in a folder of that name", DEPTH_FOLDER)
     if folder.exists() and not force:
         raise InputError(folder, "already exists; pass --force to replace it", "--force")
     points, coverage = 0, []

@@ -164,3 +164,35 @@ def test_bad_input_names_the_file_and_field_and_writes_nothing(demo_scans, tmp_p
     assert len(err) == 1 and f": {field}: " in err[0]
     assert (work / "pkg" / "manifest.json").read_text() == before
     assert sorted(p.name for p in (work / "pkg").iterdir()) == ["manifest.json"]
+
+
+def _fresh_package(tmp_path):
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    shutil.copy(DEMO / "manifest.json", pkg / "manifest.json")
+    return pkg
+
+
+@pytest.mark.parametrize("extra, field", [(["--camera", "rear"], "--camera"), (["--min-depth", "-1"], "--min-depth")])
+def test_bad_options_are_refused(demo_scans, tmp_path, capsys, extra, field):
+    _, scans, calib, _, _ = demo_scans
+    pkg = _fresh_package(tmp_path)
+    assert main(["import", "lidar", str(pkg), str(scans), "--sensor-to-camera", str(calib), "--force",
+                 "--quiet", *extra]) == 2
+    assert f"{field}: " in capsys.readouterr().err
+    assert sorted(p.name for p in pkg.iterdir()) == ["manifest.json"]
+
+
+def test_a_package_leading_the_depth_folder_elsewhere_is_refused(demo_scans, tmp_path, capsys):
+    _, scans, calib, _, _ = demo_scans
+    pkg = _fresh_package(tmp_path)
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (pkg / "lidar_depth").symlink_to(outside)
+    args = ["import", "lidar", str(pkg), str(scans), "--sensor-to-camera", str(calib), "--force", "--quiet"]
+    assert main(args) == 2
+    assert "leads outside the package" in capsys.readouterr().err and not any(outside.iterdir())
+    (pkg / "lidar_depth").unlink()
+    (pkg / "lidar_depth").write_text("not a folder")
+    assert main(args) == 2
+    assert "lidar_depth: is a file" in capsys.readouterr().err
