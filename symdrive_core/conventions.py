@@ -53,6 +53,13 @@ def opencv_camera_to_blender(c2w_opencv: np.ndarray) -> np.ndarray:
     return c2w @ BLENDER_TO_OPENCV_CAMERA
 
 
+def is_rigid(M: np.ndarray) -> bool:
+    """Whether a 4x4 matrix is a rotation (orthonormal, det +1) and a translation, last row 0 0 0 1."""
+    R = M[:3, :3]
+    return (np.allclose(R @ R.T, np.eye(3), atol=1e-4) and abs(np.linalg.det(R) - 1) < 1e-4
+            and np.allclose(M[3], [0, 0, 0, 1]))
+
+
 def invert_rigid(T: np.ndarray) -> np.ndarray:
     """Inverse of a 4x4 rigid transform, exact for rotation + translation."""
     T = np.asarray(T, dtype=np.float64)

@@ -1,4 +1,5 @@
-"""``symdrive import colmap|nerfstudio|3dgs``: a reconstruction of a recorded drive -> a scene package."""
+"""``symdrive import colmap|nerfstudio|3dgs``: a reconstruction of a recorded drive -> a scene package;
+``symdrive import lidar``: its LiDAR scans -> the package's sparse depth."""
 
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ def _common(p, images: bool) -> None:
 
 
 def add_commands(sub) -> None:
-    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package")
+    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package; "
+                                              "add LiDAR depth to one")
     isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
     p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary); distorted cameras with --undistort")
     p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
@@ -52,6 +54,19 @@ def add_commands(sub) -> None:
     _common(p, images=True)
     p.add_argument("--iteration", type=count_int, help="point_cloud/iteration_N to use (default: the newest)")
     p.set_defaults(func=_gs)
+    p = isub.add_parser("lidar", help="add sparse depth from per-frame LiDAR scans to a scene package")
+    p.add_argument("package", metavar="PACKAGE", help="scene package folder (or its manifest.json)")
+    p.add_argument("scans", metavar="SCANS_DIR",
+                   help="one scan per package frame, in name order: KITTI velodyne .bin, .npz with 'points', or .ply")
+    p.add_argument("--sensor-to-camera", required=True, metavar="FILE",
+                   help="the LiDAR-to-camera rigid transform: 12 or 16 numbers (row-major 3x4 or 4x4), or a KITTI "
+                        "calibration file (Tr_velo_to_cam with R0_rect, or R and T)")
+    p.add_argument("--camera", help="the package camera the scans are projected into (default: the first)")
+    p.add_argument("--min-depth", type=float, metavar="M",
+                   help="drop returns nearer to the camera than this, in metres (default: LidarConfig)")
+    p.add_argument("--force", action="store_true", help="replace the camera's depth maps if it has some")
+    add_quiet_option(p)
+    p.set_defaults(func=_lidar)
 
 
 def _options(args, copy_images: bool = False):
@@ -159,3 +174,24 @@ def _gs(args) -> int:
     src = read_gs_output(args.model, args.images, iteration=args.iteration, splats=args.splats,
                          camera_name=args.camera_name, fps=args.fps)
     return _finish(src, args, t0)
+
+
+def _lidar(args) -> int:
+    from dataclasses import replace
+
+    from ..errors import InputError
+    from ..importers.lidar import LidarConfig, import_lidar, read_sensor_to_camera
+
+    t0 = time.perf_counter()
+    config = LidarConfig()
+    if args.min_depth is not None:
+        if not args.min_depth >= 0:
+            raise InputError("--min-depth", f"expected a distance >= 0 in metres, got {args.min_depth}")
+        config = replace(config, min_depth_m=args.min_depth)
+    T = read_sensor_to_camera(args.sensor_to_camera)
+    info = import_lidar(args.package, args.scans, T, camera=args.camera, force=args.force, config=config,
+                        progress=not args.quiet)
+    print(f"{info['package']}: sparse depth for camera {info['camera']} in {info['folder']}/ from {info['frames']} "
+          f"scans ({info['points']} points, {100 * info['measured_fraction']:.1f}% of pixels measured; "
+          f"{time.perf_counter() - t0:.1f} s)")
+    return 0

@@ -16,7 +16,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="output folder (default PACKAGE/reconstruction)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint if present")
     p.add_argument("--sh-degree", type=count_int, default=None, help="SH degree of the result (default 1)")
-    p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight (default 0: off)")
+    p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight at the depth maps' measured pixels (default 0: off)")
     p.add_argument("--max-gaussians", type=positive_int, default=None, help="cap for densification (default 200000)")
     p.add_argument("--max-init-points", type=positive_int, default=None, help="point-cloud subset to start from (default 30000)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the reconstruction (default 0)")

@@ -12,11 +12,13 @@ falling with ``|s - t|``; pixels no frame sees take the raw render.
 
 Depth of the ground from the model, not from the reconstruction's render: rendered road depth
 wiggles, and the lane line with it. The source frames' depth is the package's recorded depth
-(``cameras[].frames[].depth``, OpenCV z-depth, 0 = sky, as LiDAR gives) where it has it, else
-the reconstruction's rendered depth with a looser tolerance. The ground model is one plane per
-window of frames along the camera path, each fitted by :func:`~..importers.ground.fit_ground` to
-the package's points (``background.points``) or the splat centres; a ray takes the
-plane of the window whose anchor camera is nearest to where it meets the ground.
+(``cameras[].frames[].depth``, decoded by :mod:`..scene.depth`) at the pixels it measured, the
+reconstruction's rendered depth with a looser tolerance at the pixels it did not (all of them
+where a frame has no depth; most of them with sparse LiDAR depth); sky is never ground. The
+ground model is one plane per window of frames along the camera path, each fitted by
+:func:`~..importers.ground.fit_ground` to the package's points (``background.points``) or the
+splat centres; a ray takes the plane of the window whose anchor camera is nearest to where it
+meets the ground.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import numpy as np
 from .. import conventions
 from ..errors import SymDriveError
 from ..importers.ground import AlignmentError, fit_ground
+from ..scene.depth import UNMEASURED, measured, read_depth
 
 
 class WarpError(SymDriveError):
@@ -113,13 +116,14 @@ def pixel_rays(K, c2w, width: int, height: int) -> np.ndarray:
 
 @dataclass
 class SourceFrame:
-    """A recorded frame as a warp source: its camera, image and z-depth (0 = nothing)."""
+    """A recorded frame as a warp source: its camera, image and z-depth (metres; 0, NaN or +inf:
+    no surface known there)."""
 
     K: np.ndarray
     camera_to_world: np.ndarray
     image: np.ndarray  # [H, W, C]
     depth: np.ndarray  # [H, W]
-    tolerance: float  # relative depth agreement that counts as ground
+    tolerance: float | np.ndarray  # relative depth agreement that counts as ground (per pixel [H, W])
     ground: np.ndarray | None = field(default=None, repr=False)  # [H, W] bool, filled by the warper
 
 
@@ -143,7 +147,8 @@ class GroundWarper:
         h, w = src.depth.shape
         lam, hits = self.ground.intersect(src.camera_to_world[:3, 3], pixel_rays(src.K, src.camera_to_world, w, h))
         d = src.depth.reshape(-1).astype(np.float64)
-        ok = hits & (d > 0) & (np.abs(d - lam) <= src.tolerance * lam)
+        tol = np.broadcast_to(np.asarray(src.tolerance, dtype=np.float64), (h, w)).reshape(-1)
+        ok = hits & measured(d) & (np.abs(d - lam) <= tol * lam)
         return ok.reshape(h, w)
 
     def ground_points(self, K, c2w, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -217,7 +222,7 @@ def _sample(src: SourceFrame, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def package_warper(manifest, cam, gaussians=None, config: WarpConfig = DEFAULT) -> GroundWarper:
     """The warper for camera ``cam`` of a package: the ground fitted to ``background.points``
     (else the splat centres of ``gaussians``), every recorded frame a source, with the package's
-    depth where it has it, else the depth ``gaussians`` render."""
+    depth where it measured, else the depth ``gaussians`` render."""
     from ..io.images import read_image
     from ..io.points import read_points
 
@@ -236,18 +241,20 @@ def package_warper(manifest, cam, gaussians=None, config: WarpConfig = DEFAULT) 
         if not cf.image:
             continue
         image = read_image(manifest.resolve(cf.image), channels=3)
-        if cf.depth:
-            depth, tol = read_image(manifest.resolve(cf.depth), channels=1)[..., 0], config.depth_tolerance
-        elif gaussians is not None:
+        depth = read_depth(manifest, cam, fi)
+        if depth is None and gaussians is None:
+            raise WarpError(f"{where}: cameras.{cam.name}.frames[{fi}] has no depth and there are no background "
+                            "splats to render it from: the geometry-guided warp needs one of them for occlusion")
+        if depth is None:
+            depth = np.full((cam.height, cam.width), UNMEASURED, np.float32)
+        unmeasured = np.isnan(depth)
+        if unmeasured.any() and gaussians is not None:
             from ..scene.camera import CameraView
             from ..splat.render import SplatRenderer
 
             renderer = renderer or SplatRenderer(gaussians)
-            depth = renderer.depth(CameraView.of_frame(cam, fi), config.min_alpha)
-            tol = config.rendered_depth_tolerance
-        else:
-            raise WarpError(f"{where}: cameras.{cam.name}.frames[{fi}] has no depth and there are no background "
-                            "splats to render it from: the geometry-guided warp needs one of them for occlusion")
+            depth = np.where(unmeasured, renderer.depth(CameraView.of_frame(cam, fi), config.min_alpha), depth)
+        tol = np.where(unmeasured, config.rendered_depth_tolerance, config.depth_tolerance)
         sources[fi] = SourceFrame(cf.K, cf.camera_to_world, image, depth, tol)
     if not sources:
         raise WarpError(f"{where}: camera {cam.name!r} has no recorded images to warp")

@@ -3,8 +3,9 @@
 Kerbl et al.'s recipe at small scale: Gaussians initialised from the package's coloured point
 cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can explain them),
 trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the package's depth
-maps), Adam with per-parameter learning rates and an exponentially decaying position rate,
-SH degree raised step by step, clone/split/prune density control. Every k-th frame of the
+maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
+with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
+step by step, clone/split/prune density control. Every k-th frame of the
 drive is held out for evaluation. Checkpoints are a splat PLY plus the optimizer state in
 safetensors, so ``--resume`` continues exactly where a run stopped.
 """
@@ -27,6 +28,7 @@ from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
 from ..scene.camera import CameraView
+from ..scene.depth import is_sky, measured, read_depth
 from ..scene.ground_truth import split_frames
 from ..splat.render import params_from_gaussians, render_params
 from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
@@ -48,7 +50,7 @@ class ReconstructConfig:
     lr_scales: float = 5e-3
     lr_quats: float = 1e-3
     ssim_lambda: float = 0.2
-    depth_weight: float = 0.0  # inverse-depth L1 against the package's depth maps (0 = off)
+    depth_weight: float = 0.0  # inverse-depth L1 at the depth maps' measured pixels (0 = off)
     init_opacity: float = 0.3
     sky_points: int = 4000
     max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
@@ -67,7 +69,7 @@ class View:
     K: torch.Tensor  # [3,3] float32
     viewmat: torch.Tensor  # [4,4] world-to-camera
     image: torch.Tensor  # [H,W,3]
-    depth: torch.Tensor | None  # [H,W], 0 = sky / unknown
+    depth: torch.Tensor | None  # [H,W] metres, +inf = sky, NaN = unmeasured (scene/depth.py)
     width: int
     height: int
 
@@ -86,9 +88,9 @@ def load_views(manifest: Manifest, frames: list[int], camera: str | None = None,
             raise InputError(manifest.path or manifest.root, "frame has no image to train on",
                              f"cameras.{cam.name}.frames[{i}].image")
         img = read_image(manifest.resolve(cf.image), channels=3)
-        d = None
-        if depth and cf.depth is not None:
-            d = torch.from_numpy(read_image(manifest.resolve(cf.depth))[:, :, 0].copy())
+        d = read_depth(manifest, cam, i) if depth else None
+        if d is not None:
+            d = torch.from_numpy(d)
         views.append(View(i, torch.tensor(cf.K, dtype=torch.float32),
                           torch.tensor(cf.world_to_camera, dtype=torch.float32),
                           torch.from_numpy(img), d, cam.width, cam.height))
@@ -118,12 +120,13 @@ def scene_extent(views: list[View]) -> tuple[float, torch.Tensor]:
 
 
 def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generator):
-    """Points on a sphere of ``radius`` around each camera, along its sky pixels (depth 0)."""
+    """Points on a sphere of ``radius`` around each camera, along the pixels its depth calls sky
+    (never the unmeasured pixels of sparse depth)."""
     pts, cols = [], []
     for v in views:
         if v.depth is None:
             continue
-        ys, xs = np.nonzero(v.depth.numpy() <= 0)
+        ys, xs = np.nonzero(is_sky(v.depth.numpy()))
         if len(ys) == 0:
             continue
         K = v.K.numpy().astype(np.float64)
@@ -188,13 +191,13 @@ def position_lr(cfg: ReconstructConfig, extent: float, it: int) -> float:
 
 
 def depth_loss(info: dict, alpha: torch.Tensor, target: torch.Tensor | None) -> torch.Tensor | None:
-    """L1 between rendered and true inverse depth, where the truth has a surface and the
-    render is mostly opaque (the rasterizer's depth is alpha-normalised)."""
+    """L1 between rendered and true inverse depth, where the truth measured a surface (neither sky
+    nor unmeasured) and the render is mostly opaque (the rasterizer's depth is alpha-normalised)."""
     pred = info.get("depth")
     if pred is None or target is None:
         return None
     pred = pred.reshape(target.shape)
-    valid = (target > 0) & (alpha.reshape(target.shape).detach() > 0.5)
+    valid = measured(target) & (alpha.reshape(target.shape).detach() > 0.5)
     if not valid.any():
         return None
     return (1.0 / pred[valid].clamp_min(1e-3) - 1.0 / target[valid]).abs().mean()

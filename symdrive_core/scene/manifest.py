@@ -21,6 +21,7 @@ from ..errors import InputError
 from ..io import open_regular
 from ..io.atomic import write_text_atomic
 from ..io.images import MAX_IMAGE_SIDE
+from .depth import DEPTH_ZERO
 from .paths import check_name, check_path_text, check_relative, is_inside, resolve_inside
 from .poses import Pose
 from .schema import SCHEMA_PATH, schema_problems  # noqa: F401 - SCHEMA_PATH: where the format is defined
@@ -64,6 +65,7 @@ class Camera:
     width: int
     height: int
     frames: list[CameraFrame]
+    depth_zero: str = "sky"  # what 0 in this camera's depth maps means (see scene/depth.py)
 
 
 @dataclass
@@ -226,6 +228,7 @@ class Manifest:
                             "quaternion": conventions.QUATERNION_ORDER},
             "frames": [{"index": f.index, "timestamp": f.timestamp} for f in self.frames],
             "cameras": [{"name": c.name, "width": c.width, "height": c.height,
+                         **({} if c.depth_zero == "sky" else {"depth_zero": c.depth_zero}),
                          "frames": [camera_frame(cf) for cf in c.frames]} for c in self.cameras],
             "background": {"splats": self.background_splats, "points": self.background_points},
             "actors": [{
@@ -359,12 +362,6 @@ class _Reader:
         return np.stack([self.vector(row, c, f"{where}[{i}]") for i, row in enumerate(v)])
 
 
-def _rigid_ok(M: np.ndarray) -> bool:
-    R = M[:3, :3]
-    return (np.allclose(R @ R.T, np.eye(3), atol=1e-4) and abs(np.linalg.det(R) - 1) < 1e-4
-            and np.allclose(M[3], [0, 0, 0, 1]))
-
-
 def _check_depth(rd: "_Reader", data: Any) -> None:
     """No value nested deeper than ``JSON_DEPTH_MAX`` (iteratively: deep input cannot recurse)."""
     stack: list[tuple[Any, int, str]] = [(data, 0, "(root)")]
@@ -445,6 +442,9 @@ def _cameras(rd: _Reader, d: dict, nf: int) -> list[Camera]:
             rd.fail(f"{w}.name", f"duplicate camera name {cname!r}")
         width = rd.integer(rd.key(c, "width", w), f"{w}.width", 1, MAX_IMAGE_SIDE)
         height = rd.integer(rd.key(c, "height", w), f"{w}.height", 1, MAX_IMAGE_SIDE)
+        depth_zero = c.get("depth_zero", "sky")
+        if depth_zero not in DEPTH_ZERO:
+            rd.fail(f"{w}.depth_zero", f"expected one of {', '.join(DEPTH_ZERO)}, got {depth_zero!r}")
         cfs = rd.lst(rd.key(c, "frames", w), f"{w}.frames")
         if len(cfs) != nf:
             rd.fail(f"{w}.frames", f"expected {nf} entries (one per frame), got {len(cfs)}")
@@ -461,7 +461,7 @@ def _cameras(rd: _Reader, d: dict, nf: int) -> list[Camera]:
             if np.abs(K[:2, [1, 2]]).max() > PRINCIPAL_MAX:
                 rd.fail(f"{wf}.K", f"skew, cx and cy must lie within {PRINCIPAL_MAX:g} pixels")
             c2w = rd.matrix(rd.key(cf, "camera_to_world", wf), 4, 4, f"{wf}.camera_to_world")
-            if not _rigid_ok(c2w):
+            if not conventions.is_rigid(c2w):
                 rd.fail(f"{wf}.camera_to_world", "not a rigid transform (rotation must be orthonormal, det +1)")
             if np.abs(c2w[:3, 3]).max() > COORD_MAX:
                 rd.fail(f"{wf}.camera_to_world", f"position beyond {COORD_MAX:g} m")
@@ -476,7 +476,7 @@ def _cameras(rd: _Reader, d: dict, nf: int) -> list[Camera]:
                 K, c2w, w2c,
                 rd.ref(cf.get("image"), f"{wf}.image"),
                 rd.ref(cf.get("depth"), f"{wf}.depth")))
-        cameras.append(Camera(cname, width, height, camera_frames))
+        cameras.append(Camera(cname, width, height, camera_frames, depth_zero))
     if not cameras:
         rd.fail("cameras", "expected at least one camera")
     return cameras
@@ -595,7 +595,7 @@ def _source(rd: _Reader, d: dict) -> dict:
     if "transform" in source:
         T = rd.matrix(source["transform"], 4, 4, "source.transform")
         det = np.linalg.det(T[:3, :3])
-        if not np.allclose(T[3], [0, 0, 0, 1]) or det <= 0 or not _rigid_ok(
+        if not np.allclose(T[3], [0, 0, 0, 1]) or det <= 0 or not conventions.is_rigid(
                 np.vstack([np.hstack([T[:3, :3] / np.cbrt(det), T[:3, 3:]]), [0, 0, 0, 1]])):
             rd.fail("source.transform", "not a similarity (scaled rotation, positive scale, last row 0 0 0 1)")
     return source

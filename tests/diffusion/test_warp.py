@@ -154,3 +154,76 @@ def test_a_package_without_depth_or_background_is_refused(tmp_path):
     m.background_points = "points.ply"
     with pytest.raises(WarpError, match="no depth"):
         package_warper(m, cam)
+
+
+
+def pitched_camera(x: float) -> np.ndarray:
+    """OpenCV camera 3 m over (x, 0) looking at the ground 6 m ahead (27 degrees down): steep
+    enough that splat-rendered ground depth is within the warp's rendered-depth tolerance."""
+    from tests.conftest import look_at_c2w
+
+    return look_at_c2w((x, 0.0, 3.0), (x + 6.0, 0.0, 0.0))
+
+
+def sparse_depth_package(root, zero: str, off_pixels=()):
+    """Nine frames 3 m over the textured plane with LiDAR-like depth: 5% of the pixels
+    measured (0 elsewhere); ``off_pixels`` (row, col) are measured 5% short of the ground, as a
+    low object would be. Background points and flat splats lie on the plane."""
+    from symdrive_core.gaussians import Gaussians
+    from symdrive_core.io.images import write_image
+    from symdrive_core.io.points import write_points
+    from symdrive_core.scene.manifest import Camera, CameraFrame, Frame, Manifest
+
+    rng = np.random.default_rng(0)
+    frames, cam_frames = [], []
+    for i in range(9):
+        c2w = pitched_camera(float(i))
+        img, depth, _ = render_ground(c2w)
+        sparse = np.where(rng.random(depth.shape) < 0.05, depth, 0.0)
+        for r, c in off_pixels:
+            sparse[r, c] = 0.95 * depth[r, c]
+        write_image(root / f"img/{i}.exr", img.astype(np.float32), dtype="float")
+        write_image(root / f"depth/{i}.exr", sparse.astype(np.float32), dtype="float")
+        frames.append(Frame(i, 0.1 * i))
+        cam_frames.append(CameraFrame(K, c2w, conventions.invert_rigid(c2w), f"img/{i}.exr", f"depth/{i}.exr"))
+    grid = np.stack(np.meshgrid(np.arange(-1.0, 30.0, 0.2), np.arange(-16.0, 16.0, 0.2), [0.0]), -1).reshape(-1, 3)
+    write_points(root / "points.ply", grid[::7], np.zeros_like(grid[::7]))
+    n = len(grid)
+    splats = Gaussians.from_activated(grid, np.tile([1.0, 0, 0, 0], (n, 1)), np.tile([0.15, 0.15, 0.01], (n, 1)),
+                                      np.full(n, 0.99), np.full((n, 3), 0.5))
+    cam = Camera("front", W, H, cam_frames, zero)
+    return Manifest("t", frames, [cam], [], background_points="points.ply", root=root), splats
+
+
+NEAR_ROWS = slice(32, H)  # ground from 1.5 m to 6 m ahead
+
+
+def test_sparse_depth_gaps_take_the_rendered_depth_not_sky(tmp_path):
+    off = [(45, 20), (50, 40)]
+    m, splats = sparse_depth_package(tmp_path, "unmeasured", off)
+    cam = m.cameras[0]
+    warper = package_warper(m, cam, splats)
+    for src in warper.sources.values():
+        near = src.ground[NEAR_ROWS].copy()
+        for r, c in off:  # measured 5% short: the measured depth and its tight tolerance decide
+            assert not src.ground[r, c]
+            near[r - NEAR_ROWS.start, c] = True
+        assert near.all()  # everywhere else the rendered depth fills the gaps
+    c2w = conventions.lateral_shift(pitched_camera(4.0), 2.0)
+    w = warper.warp(4, K, c2w, W, H, np.zeros((H, W, 3)))
+    assert w.mask[NEAR_ROWS].all() and w.mask.mean() > 0.6  # farther up the render's depth bias exceeds its tolerance
+    truth, _, _ = render_ground(c2w)
+    assert np.abs(w.image[w.mask] - truth[w.mask]).max() < 1e-3  # bilinear sampling of perspective images
+
+    m.cameras[0].depth_zero = "sky"  # the same maps read as dense: every gap is sky, never ground
+    legacy = package_warper(m, cam, splats)
+    assert max(src.ground.mean() for src in legacy.sources.values()) < 0.06  # the 5% measured
+    assert legacy.warp(4, K, c2w, W, H, np.zeros((H, W, 3))).mask.mean() < 0.01
+
+
+def test_sparse_depth_without_splats_uses_the_measured_pixels_only(tmp_path):
+    m, _ = sparse_depth_package(tmp_path, "unmeasured")
+    warper = package_warper(m, m.cameras[0])
+    for src in warper.sources.values():
+        stored = np.isfinite(src.depth) & (src.depth > 0)
+        assert np.array_equal(src.ground, stored) and 0.02 < stored.mean() < 0.06

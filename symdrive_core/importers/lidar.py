@@ -1,0 +1,211 @@
+"""LiDAR scans -> sparse depth maps of a package camera (``symdrive import lidar``).
+
+A recorded drive's LiDAR is the depth a reconstruction and the geometry-guided warp can trust,
+but it measures a few pixels of each image, not all of them. One scan per package frame (in
+name order, numbers compared as numbers): KITTI's ``velodyne`` ``.bin`` (float32 x, y, z,
+reflectance), an ``.npz`` whose ``points`` array is [N, >= 3], or a PLY with x, y, z. Points move
+into the camera by the rig's fixed sensor-to-camera transform and are projected with each
+frame's K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is
+hidden by the pole). Maps are float EXR under ``lidar_depth/<camera>/``, 0 where no point landed,
+and the camera is declared ``depth_zero: "unmeasured"`` (see :mod:`..scene.depth`) so no reader
+takes the gaps for sky. Depths are in the scan's metres: the package's world must be metric
+(import it with ``--camera-height`` or ``--scale``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import conventions
+from ..errors import InputError
+from ..io import check_regular
+from .frames import natural_key
+
+SCAN_SUFFIXES = (".bin", ".npz", ".ply")
+DEPTH_FOLDER = "lidar_depth"
+MAX_SCAN_BYTES = 1 << 30  # a 128-beam scan is tens of MB; this stops a hostile file, not a real one
+_KEYED_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:(.*)$")
+
+
+@dataclass(frozen=True)
+class LidarConfig:
+    # Returns nearer to the camera than this (metres) are dropped: the ego vehicle, spray, noise.
+    min_depth_m: float = 0.5
+
+
+def read_scan(path: Path) -> np.ndarray:
+    """The finite points [N, 3] (float64, sensor frame) of one scan; rows with NaN or inf, which
+    drivers write for beams without a return, are dropped."""
+    path = Path(path)
+    size = check_regular(path, "points").st_size
+    if size > MAX_SCAN_BYTES:
+        raise InputError(path, f"{size} bytes; scans above {MAX_SCAN_BYTES} bytes are not read", "points")
+    suffix = path.suffix.lower()
+    if suffix == ".bin":
+        if size % 16:
+            raise InputError(path, f"{size} bytes is not a whole number of KITTI records "
+                                   "(float32 x, y, z, reflectance)", "points")
+        points = np.fromfile(path, dtype="<f4").reshape(-1, 4)[:, :3]
+    elif suffix == ".npz":
+        points = _npz_points(path)
+    elif suffix == ".ply":
+        from ..io.ply import read_header, read_vertex_table
+
+        table = read_vertex_table(path, read_header(path))
+        missing = [c for c in "xyz" if c not in table.dtype.names]
+        if missing:
+            raise InputError(path, f"scan lacks {', '.join(missing)}", "element vertex")
+        points = np.stack([table[c] for c in "xyz"], 1)
+    else:
+        raise InputError(path, f"unknown scan format; expected one of {', '.join(SCAN_SUFFIXES)}", "points")
+    points = np.asarray(points, dtype=np.float64)
+    return points[np.isfinite(points).all(1)]
+
+
+def _npz_points(path: Path) -> np.ndarray:
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "points" not in z.files:
+                has = ", ".join(z.files) or "nothing"
+                raise InputError(path, f"no 'points' array (has: {has})", "points")
+            points = z["points"]
+    except (ValueError, OSError, zipfile.BadZipFile) as exc:
+        raise InputError(path, f"not a readable .npz: {exc}", "points") from None
+    if points.ndim != 2 or points.shape[1] < 3 or points.dtype.kind not in "fiu":
+        raise InputError(path, f"expected numbers [N, 3 or more], got {points.dtype} {list(points.shape)}", "points")
+    return points[:, :3]
+
+
+def read_sensor_to_camera(path: Path) -> np.ndarray:
+    """The rig's rigid sensor-to-camera transform [4, 4] from a text file: 12 or 16 numbers (a
+    row-major 3x4 or 4x4), or a KITTI calibration file (``Tr_velo_to_cam`` followed by ``R0_rect``
+    when present, as KITTI projects into its rectified camera; or ``R`` and ``T`` as in
+    ``calib_velo_to_cam.txt``)."""
+    path = Path(path)
+    if check_regular(path, "--sensor-to-camera").st_size > 1 << 20:
+        raise InputError(path, "larger than 1 MB: not a calibration file", "--sensor-to-camera")
+    text = path.read_text(encoding="utf-8", errors="replace")
+    keyed = {}
+    for line in text.splitlines():
+        m = _KEYED_LINE.match(line)
+        if m:
+            keyed[m.group(1)] = m.group(2)
+
+    def numbers(s: str, n: int, where: str) -> np.ndarray:
+        try:
+            v = np.array([float(x) for x in s.replace(",", " ").split()], dtype=np.float64)
+        except ValueError:
+            raise InputError(path, f"expected {n} numbers", where) from None
+        if len(v) != n or not np.isfinite(v).all():
+            raise InputError(path, f"expected {n} finite numbers, got {len(v)}", where)
+        return v
+
+    T = np.eye(4)
+    if "Tr_velo_to_cam" in keyed:
+        T[:3] = numbers(keyed["Tr_velo_to_cam"], 12, "Tr_velo_to_cam").reshape(3, 4)
+        if "R0_rect" in keyed:
+            rect = np.eye(4)
+            rect[:3, :3] = numbers(keyed["R0_rect"], 9, "R0_rect").reshape(3, 3)
+            T = rect @ T
+        where = "Tr_velo_to_cam"
+    elif "R" in keyed and "T" in keyed:
+        T[:3, :3] = numbers(keyed["R"], 9, "R").reshape(3, 3)
+        T[:3, 3] = numbers(keyed["T"], 3, "T")
+        where = "R"
+    else:
+        text = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+        count = len(text.replace(",", " ").split())
+        where = "transform"
+        v = numbers(text, 16 if count == 16 else 12, where)
+        T[: len(v) // 4] = v.reshape(-1, 4)
+    if not conventions.is_rigid(T):
+        raise InputError(path, "not a rigid transform (rotation must be orthonormal, det +1; "
+                               "last row 0 0 0 1)", where)
+    return T
+
+
+def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
+                 min_depth_m: float) -> np.ndarray:
+    """Camera z-depth [H, W] (float32) of the nearest point landing in each pixel, 0 where none
+    does. Pixel (0, 0) covers [0, 1)^2 (``conventions.PIXEL_CENTER_OFFSET``)."""
+    uv, z = conventions.project_points(points, sensor_to_camera, K)
+    keep = (z >= min_depth_m) & np.isfinite(uv).all(1)
+    col = np.floor(uv[keep, 0]).astype(np.int64)
+    row = np.floor(uv[keep, 1]).astype(np.int64)
+    inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    depth = np.full(width * height, np.inf)
+    np.minimum.at(depth, row[inside] * width + col[inside], z[keep][inside])
+    depth[np.isinf(depth)] = 0.0
+    return depth.reshape(height, width).astype(np.float32)
+
+
+def list_scans(folder: Path) -> list[Path]:
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "not a folder of scans", "SCANS_DIR")
+    scans = [p for p in folder.iterdir() if p.suffix.lower() in SCAN_SUFFIXES and not p.name.startswith(".")]
+    return sorted(scans, key=lambda p: natural_key(p.name))
+
+
+def import_lidar(package, scans_dir, sensor_to_camera: np.ndarray, *, camera: str | None = None,
+                 force: bool = False, config: LidarConfig = LidarConfig(), progress: bool = True) -> dict:
+    """Write one sparse depth map per frame of ``camera`` (default: the package's first) from the
+    scans in ``scans_dir`` and point the camera's frames at them. The maps are written whole into
+    the package (a temporary folder renamed into place) before the manifest names them; bad
+    input leaves the package as it was. Returns a summary (frames, points, measured fraction)."""
+    from tqdm import tqdm
+
+    from ..io.atomic import atomic_directory
+    from ..io.images import write_image
+    from ..scene import is_inside, load_manifest
+
+    m = load_manifest(package)
+    where = m.path or m.root
+    try:
+        cam = m.camera(camera) if camera else m.cameras[0]
+    except KeyError:
+        raise InputError(where, f"no camera named {camera!r} (has: {', '.join(c.name for c in m.cameras)})",
+                         "--camera") from None
+    ci = m.cameras.index(cam)
+    scans = list_scans(scans_dir)
+    if len(scans) != len(cam.frames):
+        raise InputError(scans_dir, f"{len(scans)} scans ({', '.join(SCAN_SUFFIXES)}) for {len(cam.frames)} "
+                                    "package frames: expected one scan per frame", "SCANS_DIR")
+    if not force and any(cf.depth is not None for cf in cam.frames):
+        first = next(i for i, cf in enumerate(cam.frames) if cf.depth is not None)
+        raise InputError(where, f"camera {cam.name!r} already has depth maps; pass --force to replace them",
+                         f"cameras[{ci}].frames[{first}].depth")
+    folder = m.root / DEPTH_FOLDER / cam.name
+    if not is_inside(folder.parent, m.root):
+        raise InputError(where, f"{DEPTH_FOLDER}/ leads outside the package (a symlink)", DEPTH_FOLDER)
+    if folder.parent.exists() and not folder.parent.is_dir():
+        raise InputError(folder.parent, "is a file; the depth maps go in a folder of that name", DEPTH_FOLDER)
+    if folder.exists() and not force:
+        raise InputError(folder, "already exists; pass --force to replace it", "--force")
+    points, coverage = 0, []
+    new_parent = not folder.parent.exists()
+    try:
+        with atomic_directory(folder) as tmp:
+            for fi, scan in enumerate(tqdm(scans, desc="lidar", unit="scan", disable=not progress)):
+                cf = cam.frames[fi]
+                pts = read_scan(scan)
+                depth = sparse_depth(pts, sensor_to_camera, cf.K, cam.width, cam.height, config.min_depth_m)
+                write_image(tmp / f"{fi:06d}.exr", depth, dtype="float")
+                points += len(pts)
+                coverage.append(float((depth > 0).mean()))
+    except BaseException:
+        if new_parent:
+            folder.parent.rmdir()  # the folder atomic_directory made for the temporary one
+        raise
+    for fi, cf in enumerate(cam.frames):
+        cf.depth = f"{DEPTH_FOLDER}/{cam.name}/{fi:06d}.exr"
+    cam.depth_zero = "unmeasured"
+    m.save()
+    return {"package": str(m.root), "camera": cam.name, "frames": len(scans), "points": points,
+            "measured_fraction": float(np.mean(coverage)), "folder": f"{DEPTH_FOLDER}/{cam.name}"}

@@ -1,0 +1,87 @@
+"""Sparse depth in the reconstruction: gaps are unmeasured, not sky (no sky dome seeded there), and
+the depth loss is the inverse-depth L1 at the measured pixels only."""
+
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from symdrive_core.io.images import read_image, write_image
+from symdrive_core.optim.reconstruct import ReconstructConfig, depth_loss, load_views, reconstruct, sky_points
+from symdrive_core.scene import load_manifest
+from symdrive_core.scene.ground_truth import split_frames
+
+
+@pytest.fixture(scope="module")
+def sparse_package(synthetic_package, tmp_path_factory):
+    """The synthetic package with 5% of each depth map kept (0 elsewhere), declared unmeasured."""
+    src, _ = synthetic_package
+    root = tmp_path_factory.mktemp("sparse") / "pkg"
+    shutil.copytree(src, root)
+    m = load_manifest(root)
+    rng = np.random.default_rng(0)
+    cam = m.cameras[0]
+    for i, cf in enumerate(cam.frames):
+        d = read_image(m.resolve(cf.depth))[..., 0]
+        keep = rng.random(d.shape) < 0.05
+        write_image(root / f"sparse/{i:03d}.exr", np.where(keep, d, 0.0).astype(np.float32), dtype="float")
+        cf.depth = f"sparse/{i:03d}.exr"
+    cam.depth_zero = "unmeasured"
+    m.save()
+    return root
+
+
+def test_gaps_in_sparse_depth_seed_no_sky(sparse_package):
+    m = load_manifest(sparse_package)
+    views = load_views(m, split_frames(m)[0])
+    gaps = sum(int(np.isnan(v.depth.numpy()).sum()) for v in views)
+    assert gaps > 0.9 * sum(v.width * v.height for v in views)
+    pts, _ = sky_points(views, 1000, 100.0, np.random.default_rng(0))
+    assert len(pts) == 0
+    m.cameras[0].depth_zero = "sky"  # the same files read the way dense maps are: gaps become sky
+    pts, _ = sky_points(load_views(m, split_frames(m)[0]), 1000, 100.0, np.random.default_rng(0))
+    assert len(pts) == 1000
+    eye = m.cameras[0].frames[0].camera_to_world[:3, 3]
+    assert np.linalg.norm(pts - eye, axis=1).min() > 95.0  # on the sphere around some camera
+
+
+def test_depth_loss_is_inverse_depth_l1_at_measured_pixels_only():
+    target = torch.tensor([[2.0, float("nan"), float("inf")], [4.0, 0.5, 8.0]])
+    pred = torch.tensor([[2.5, 9.0, 9.0], [3.0, 0.4, 7.0]], dtype=torch.float32, requires_grad=True)
+    alpha = torch.tensor([[1.0, 1.0, 1.0], [1.0, 0.9, 0.2]])  # the last pixel: render too transparent
+    loss = depth_loss({"depth": pred[..., None]}, alpha[..., None], target)
+    p, t = np.array([2.5, 3.0, 0.4]), np.array([2.0, 4.0, 0.5])
+    oracle = np.mean(np.abs(1 / p - 1 / t))  # float64
+    assert float(loss.detach()) == pytest.approx(oracle, rel=1e-6)
+    loss.backward()
+    grad = pred.grad.numpy()
+    assert np.all(grad[[0, 0, 1], [1, 2, 2]] == 0) and np.all(grad[[0, 1, 1], [0, 0, 1]] != 0)
+    nothing = torch.full((2, 3), float("nan"))
+    assert depth_loss({"depth": pred[..., None]}, alpha[..., None], nothing) is None
+
+
+def test_sparse_depth_supervision_improves_heldout_depth(sparse_package, tmp_path):
+    """5% of the pixels measured: the held-out frames' rendered inverse depth moves towards the
+    dense truth (measured 0.0088 -> 0.0063 at 60 iterations), colour quality kept."""
+    from symdrive_core.scene.camera import CameraView
+    from symdrive_core.splat.render import SplatRenderer
+
+    m = load_manifest(sparse_package)
+    cam = m.cameras[0]
+    heldout = split_frames(m)[1]
+    errors, psnr = {}, {}
+    for weight in (0.0, 0.5):
+        cfg = ReconstructConfig(iters=60, densify_from=40, densify_every=40, checkpoint_every=60, sky_points=0,
+                                depth_weight=weight, sh_degree=0)
+        result = reconstruct(m, tmp_path / str(weight), cfg, progress=False)
+        render = SplatRenderer(result.gaussians)
+        err = []
+        for i in heldout:
+            pred = render.depth(CameraView.of_frame(cam, i), 0.5)
+            truth = read_image(sparse_package / f"depth/{i:03d}.exr")[..., 0].astype(np.float64)
+            ok = (truth > 0) & (pred > 0)
+            err.append(np.mean(np.abs(1 / pred[ok] - 1 / truth[ok])))
+        errors[weight], psnr[weight] = np.mean(err), result.metrics["heldout"]["psnr_heldout"]
+    assert errors[0.5] < 0.85 * errors[0.0], errors
+    assert psnr[0.5] > psnr[0.0] - 1.5, psnr
