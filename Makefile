@@ -1,6 +1,7 @@
 # Two entry points (see README): `make demo` and `make test`. Each creates .venv on first use.
 PYTHON ?= python3
-VENV   := .venv
+# One environment per interpreter: .venv for the default python3, .venv-python3.13 and so on for another.
+VENV   := $(if $(filter python3,$(PYTHON)),.venv,.venv-$(notdir $(PYTHON)))
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo

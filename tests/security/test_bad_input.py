@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -176,7 +177,13 @@ def _png_declaring(path: Path, width: int, height: int) -> Path:
     return path
 
 
-@pytest.mark.parametrize("side,message", [(20_000, "sides above 16384"), (100_000, "cannot read image")])
+# What is promised: refused before any pixel is allocated, in one line naming the file. Which rule
+# says no depends on the image library: older OpenImageIO reads the header and the project's size
+# rule refuses it; OpenImageIO 3.2 refuses a header claiming more bytes than the file could hold.
+REFUSED = "(sides above 16384|cannot read image)"
+
+
+@pytest.mark.parametrize("side,message", [(20_000, REFUSED), (100_000, "cannot read image")])
 def test_image_declaring_a_huge_size(make_package, capsys, tmp_path, side, message):
     png = _png_declaring(tmp_path / "huge.png", side, side)
     with pytest.raises(InputError, match=rf"huge\.png: .*{message}") as exc:
@@ -187,8 +194,9 @@ def test_image_declaring_a_huge_size(make_package, capsys, tmp_path, side, messa
     _png_declaring(manifest.parent / "huge.png", side, side)
     d["cameras"][0]["frames"][0]["image"] = "huge.png"
     manifest.write_text(json.dumps(d))
-    _one_line_naming(*_cli(capsys, "validate", manifest), str(manifest), "cameras[0].frames[0].image: huge.png",
-                     message)
+    code, err = _cli(capsys, "validate", manifest)
+    _one_line_naming(code, err, str(manifest), "cameras[0].frames[0].image: huge.png")
+    assert re.search(message, err), err
 
 
 # ------------------------------------------------------------------ names are names, by property
