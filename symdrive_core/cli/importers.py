@@ -41,16 +41,40 @@ def add_commands(sub) -> None:
     p.add_argument("--undistort", action="store_true",
                    help="undistort cameras with lens distortion (SIMPLE_RADIAL, OPENCV, ...) with COLMAP's "
                         "undistorter: PINHOLE cameras, resampled images copied into the package")
+    _lateral_truth_option(p)
     p.set_defaults(func=_colmap)
     p = isub.add_parser("nerfstudio", help="nerfstudio transforms.json (OpenGL camera axes)")
     p.add_argument("transforms", metavar="TRANSFORMS_JSON", help="nerfstudio transforms.json")
     _common(p, images=False)
+    _lateral_truth_option(p)
     p.set_defaults(func=_nerfstudio)
+    p = isub.add_parser("kitti", help="KITTI odometry sequence (rectified stereo pair, calib.txt, poses): the left "
+                                      "camera, the right one as lateral ground truth")
+    p.add_argument("sequence", metavar="SEQUENCE_DIR",
+                   help="folder with image_2/image_3 (or image_0/image_1, image_l/image_r) and calib.txt")
+    p.add_argument("--poses", help="the sequence's poses file, metres (default: SEQUENCE_DIR/poses.txt)")
+    _common(p, images=False)
+    p.set_defaults(func=_kitti)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
     p.add_argument("--iteration", type=count_int, help="point_cloud/iteration_N to use (default: the newest)")
     p.set_defaults(func=_gs)
+
+
+def _lateral_truth_option(p) -> None:
+    p.add_argument("--lateral-truth", metavar="CAMERA",
+                   help="a rectified rig's second camera: not trained on, its images become lateral ground truth of "
+                        "the first camera at the baseline measured from the poses")
+
+
+def _with_lateral_truth(src, args):
+    """``src`` with camera ``--lateral-truth`` taken out of its cameras as lateral ground truth."""
+    from ..importers.stereo import split_rig
+
+    if getattr(args, "lateral_truth", None) is not None:
+        src.grouped, src.lateral = split_rig(src.grouped, args.lateral_truth)
+    return src
 
 
 def _options(args, copy_images: bool = False):
@@ -71,13 +95,16 @@ def _options(args, copy_images: bool = False):
                    heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 
 
-def _finish(src, args, t0, copy_images: bool = False) -> int:
+def _finish(src, args, t0, copy_images: bool = False, options=None) -> int:
     from ..importers.package import write_package
 
-    info = write_package(src, _options(args, copy_images), progress=not args.quiet)
+    info = write_package(src, options or _options(args, copy_images), progress=not args.quiet)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")
+    if src.lateral is not None:
+        print(f"lateral ground truth: camera {src.lateral.name}, {len(src.lateral.views)} images at "
+              f"{info['lateral_offset_m']:+g} m of camera {src.lateral.camera} (not trained on)")
     if info["external_images"]:
         print("note: the images stay outside the package; symdrive validate/run need --allow-external-assets "
               "(or import again with --copy-images)")
@@ -95,7 +122,8 @@ def _colmap(args) -> int:
     _options(args)
     with undistorted(args.model, args.images, args.out) if args.undistort else contextlib.nullcontext() as und:
         model, images = (args.model, args.images) if und is None else (und.model, und.images)
-        src = read_colmap(model, images, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
+        src = _with_lateral_truth(read_colmap(model, images, splats=args.splats, camera_name=args.camera_name,
+                                              fps=args.fps), args)
         if und is not None:
             src.path = Path(args.model)
             src.notes["undistorted_cameras"] = und.cameras
@@ -113,7 +141,25 @@ def _nerfstudio(args) -> int:
     t0 = time.perf_counter()
     _options(args)
     src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
-    return _finish(src, args, t0)
+    return _finish(_with_lateral_truth(src, args), args, t0)
+
+
+def _kitti(args) -> int:
+    from dataclasses import replace
+
+    from ..importers.ground import camera_up_vectors
+    from ..importers.kitti import read_kitti
+    from ..importers.stereo import split_rig
+
+    t0 = time.perf_counter()
+    opt = _options(args)
+    src, right = read_kitti(args.sequence, args.poses, camera_name=args.camera_name, fps=args.fps)
+    src.grouped, src.lateral = split_rig(src.grouped, right)
+    # KITTI's poses are metric and it has no points to fit a ground to: scale 1, up the cameras' mean
+    # up vector, the ground --camera-height below the lowest camera.
+    c2ws = [v.c2w for v in src.grouped.table[0]]
+    up = opt.up or tuple(camera_up_vectors(c2ws).mean(0).tolist())
+    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up))
 
 
 def _gs(args) -> int:
