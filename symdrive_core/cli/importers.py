@@ -47,6 +47,9 @@ def add_commands(sub) -> None:
     p.add_argument("transforms", metavar="TRANSFORMS_JSON", help="nerfstudio transforms.json")
     _common(p, images=False)
     _lateral_truth_option(p)
+    p.add_argument("--undistort", action="store_true",
+                   help="undistort cameras with lens distortion (OPENCV, OPENCV_FISHEYE) with COLMAP's undistorter: "
+                        "PINHOLE cameras, resampled images copied into the package")
     p.set_defaults(func=_nerfstudio)
     p = isub.add_parser("kitti", help="KITTI odometry sequence (rectified stereo pair, calib.txt, poses): the left "
                                       "camera, the right one as lateral ground truth")
@@ -137,11 +140,23 @@ def _colmap(args) -> int:
 
 def _nerfstudio(args) -> int:
     from ..importers.nerfstudio import read_nerfstudio
+    from ..importers.undistort import undistorted_views
 
     t0 = time.perf_counter()
     _options(args)
-    src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
-    return _finish(_with_lateral_truth(src, args), args, t0)
+    src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps,
+                          undistort=args.undistort)
+    views = [v for row in src.grouped.table for v in row]
+    lensed = sum(v.lens is not None for v in views)
+    with undistorted_views(views, args.out) as cameras:
+        if cameras is not None:
+            src.notes["undistorted_cameras"] = cameras
+            models = ", ".join(f"camera {cid} ({c['model']})" for cid, c in cameras.items())
+            print(f"undistorted {lensed} images of {models} to PINHOLE with "
+                  f"COLMAP's undistorter ({time.perf_counter() - t0:.1f} s)")
+        elif args.undistort:
+            print("note: no camera has lens distortion; imported without undistorting")
+        return _finish(_with_lateral_truth(src, args), args, t0, copy_images=cameras is not None)
 
 
 def _kitti(args) -> int:
