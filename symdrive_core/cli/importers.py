@@ -75,7 +75,7 @@ def _with_lateral_truth(src, args):
     """``src`` with camera ``--lateral-truth`` taken out of its cameras as lateral ground truth."""
     from ..importers.stereo import split_rig
 
-    if getattr(args, "lateral_truth", None) is not None:
+    if args.lateral_truth is not None:
         src.grouped, src.lateral = split_rig(src.grouped, args.lateral_truth)
     return src
 
