@@ -33,7 +33,8 @@ def _common(p, images: bool) -> None:
 
 
 def add_commands(sub) -> None:
-    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package")
+    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction, or a KITTI sequence, into "
+                                        "a scene package")
     isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
     p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary); distorted cameras with --undistort")
     p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
@@ -168,10 +169,11 @@ def _kitti(args) -> int:
 
     t0 = time.perf_counter()
     opt = _options(args)
-    src, right = read_kitti(args.sequence, args.poses, camera_name=args.camera_name, fps=args.fps)
+    src, right = read_kitti(args.sequence, args.poses, splats=args.splats, camera_name=args.camera_name,
+                            fps=args.fps)
     src.grouped, src.lateral = split_rig(src.grouped, right)
-    # KITTI's poses are metric and it has no points to fit a ground to: scale 1, up the cameras' mean
-    # up vector, the ground --camera-height below the lowest camera.
+    # KITTI's poses are metric: scale 1. Without points or splats to fit a ground to, the up direction
+    # is the cameras' mean up vector and the ground lies --camera-height below the lowest camera.
     c2ws = [v.c2w for v in src.grouped.table[0]]
     up = opt.up or tuple(camera_up_vectors(c2ws).mean(0).tolist())
     return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up))

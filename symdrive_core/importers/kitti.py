@@ -116,10 +116,11 @@ def _times(path: Path) -> list[float] | None:
     return [float(_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
 
 
-def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, camera_name: str = DEFAULT_CAMERA,
-               fps: float = DEFAULT_FPS) -> tuple[Source, str]:
+def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats: str | Path | None = None,
+               camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> tuple[Source, str]:
     """(the rig as a source with two cameras, the right camera's name): the left camera is
-    ``camera_name``, the right one ``{camera_name}_right``."""
+    ``camera_name``, the right one ``{camera_name}_right``; a splat PLY (``splats``) is taken to be
+    in the poses' frame."""
     from ..io.images import image_size
 
     sequence = Path(sequence)
@@ -167,4 +168,10 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, camera_
                               source=poses_path, where=f"line {n + 1} ({folder}/{image.name})", image=image,
                               timestamp=None if times is None else times[n]))
     grouped = group_views(views, camera_name=camera_name, fps=fps)
-    return Source("kitti", sequence, grouped, notes={"poses_file": str(poses_path), "stereo_pair": list(pair)}), right
+    g = None
+    if splats is not None:
+        from ..io.ply import read_splats
+
+        g = read_splats(splats)
+    return Source("kitti", sequence, grouped, splats=g, splats_path=None if splats is None else Path(splats),
+                  notes={"poses_file": str(poses_path), "stereo_pair": list(pair)}), right

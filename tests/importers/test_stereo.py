@@ -14,7 +14,7 @@ import pytest
 
 from symdrive_core import conventions
 from symdrive_core.cli import main
-from symdrive_core.importers.similarity import apply_camera
+from symdrive_core.importers.similarity import apply_camera, transform_gaussians
 from symdrive_core.io.images import read_image, write_image
 from symdrive_core.io.ply import read_splats, write_splats
 from symdrive_core.optim.evaluate import evaluate_lateral
@@ -143,6 +143,7 @@ def test_kitti_excerpt_right_camera_is_lateral_truth_at_the_calibrated_baseline(
     seq = _write_kitti(rig, tmp_path / "seq")
     out = tmp_path / "pkg"
     m, printed = _import(["kitti", str(seq), "--copy-images", "--camera-name", "left"], out, capsys)
+    assert m.background_splats is None
     assert "at +0.5 m of camera left" in printed
     check_files(m)
     (entry,) = m.ground_truth["lateral"]
@@ -212,3 +213,20 @@ def test_lateral_truth_naming_no_camera_refused(rig, tmp_path, capsys):
     out = tmp_path / "pkg"
     rc = main(["import", *_colmap_args(rig, tmp_path, lateral="rear"), "--out", str(out), "--camera-height", "1.6"])
     assert_refused(rc, capsys.readouterr().err.strip(), out, "--lateral-truth", "no camera 'rear'", "left, right")
+
+
+def test_kitti_splats_in_the_poses_frame_score_like_the_demo(rig, tmp_path, capsys):
+    """The demo's splats written in KITTI's frame (camera 0 at the first frame): the package's
+    lateral views, K with pixel centres moved to +0.5 included, render as the demo's do."""
+    seq = _write_kitti(rig, tmp_path / "seq")
+    first = np.linalg.inv(load_manifest(DEMO).cameras[0].frames[0].camera_to_world)
+    write_splats(tmp_path / "splat.ply", transform_gaussians(demo_splats(SPLATS), first))
+    m, _ = _import(["kitti", str(seq), "--copy-images", "--splats", str(tmp_path / "splat.ply")], tmp_path / "pkg",
+                   capsys)
+    assert m.source["scale"] == 1.0
+    frames = [0, 7]
+    imported = evaluate_lateral(m, read_splats(m.resolve(m.background_splats)), "raw_3dgs", frames)
+    native = evaluate_lateral(with_lateral_offsets(load_manifest(DEMO), [BASELINE]), demo_splats(SPLATS), "raw_3dgs",
+                              [_truth_frames()[0][i] for i in frames])
+    assert abs(imported[0]["psnr"] - native[0]["psnr"]) < 0.05, (imported, native)
+    assert abs(imported[0]["ssim"] - native[0]["ssim"]) < 2e-3
