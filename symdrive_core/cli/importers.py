@@ -35,8 +35,8 @@ def _common(p, images: bool) -> None:
 
 
 def add_commands(sub) -> None:
-    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction into a scene package; "
-                                              "add LiDAR depth to one")
+    imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction, or a KITTI sequence, into "
+                                        "a scene package; add LiDAR depth to one")
     isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
     p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary); distorted cameras with --undistort")
     p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
@@ -44,11 +44,23 @@ def add_commands(sub) -> None:
     p.add_argument("--undistort", action="store_true",
                    help="undistort cameras with lens distortion (SIMPLE_RADIAL, OPENCV, ...) with COLMAP's "
                         "undistorter: PINHOLE cameras, resampled images copied into the package")
+    _lateral_truth_option(p)
     p.set_defaults(func=_colmap)
     p = isub.add_parser("nerfstudio", help="nerfstudio transforms.json (OpenGL camera axes)")
     p.add_argument("transforms", metavar="TRANSFORMS_JSON", help="nerfstudio transforms.json")
     _common(p, images=False)
+    _lateral_truth_option(p)
+    p.add_argument("--undistort", action="store_true",
+                   help="undistort cameras with lens distortion (OPENCV, OPENCV_FISHEYE) with COLMAP's undistorter: "
+                        "PINHOLE cameras, resampled images copied into the package")
     p.set_defaults(func=_nerfstudio)
+    p = isub.add_parser("kitti", help="KITTI odometry sequence (rectified stereo pair, calib.txt, poses): the left "
+                                      "camera, the right one as lateral ground truth")
+    p.add_argument("sequence", metavar="SEQUENCE_DIR",
+                   help="folder with image_2/image_3 (or image_0/image_1, image_l/image_r) and calib.txt")
+    p.add_argument("--poses", help="the sequence's poses file, metres (default: SEQUENCE_DIR/poses.txt)")
+    _common(p, images=False)
+    p.set_defaults(func=_kitti)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
@@ -67,6 +79,21 @@ def add_commands(sub) -> None:
     p.add_argument("--force", action="store_true", help="replace the camera's depth maps if it has some")
     add_quiet_option(p)
     p.set_defaults(func=_lidar)
+
+
+def _lateral_truth_option(p) -> None:
+    p.add_argument("--lateral-truth", metavar="CAMERA",
+                   help="a rectified rig's second camera: not trained on, its images become lateral ground truth of "
+                        "the first camera at the baseline measured from the poses")
+
+
+def _with_lateral_truth(src, args):
+    """``src`` with camera ``--lateral-truth`` taken out of its cameras as lateral ground truth."""
+    from ..importers.stereo import split_rig
+
+    if args.lateral_truth is not None:
+        src.grouped, src.lateral = split_rig(src.grouped, args.lateral_truth)
+    return src
 
 
 def _options(args, copy_images: bool = False):
@@ -110,15 +137,18 @@ def _triangulate(src, opt) -> None:
           f"reprojection error, {time.perf_counter() - t0:.1f} s)")
 
 
-def _finish(src, args, t0, copy_images: bool = False) -> int:
+def _finish(src, args, t0, copy_images: bool = False, options=None) -> int:
     from ..importers.package import write_package
 
-    opt = _options(args, copy_images)
+    opt = options or _options(args, copy_images)
     _triangulate(src, opt)
     info = write_package(src, opt, progress=not args.quiet)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")
+    if src.lateral is not None:
+        print(f"lateral ground truth: camera {src.lateral.name}, {len(src.lateral.views)} images at "
+              f"{info['lateral_offset_m']:+g} m of camera {src.lateral.camera} (not trained on)")
     q = info["ground_fit"]
     if q["corridor_points"]:
         print(f"ground: {q['inliers']} of {q['corridor_points']} points under the camera path on the plane "
@@ -145,7 +175,8 @@ def _colmap(args) -> int:
     _options(args)
     with undistorted(args.model, args.images, args.out) if args.undistort else contextlib.nullcontext() as und:
         model, images = (args.model, args.images) if und is None else (und.model, und.images)
-        src = read_colmap(model, images, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
+        src = _with_lateral_truth(read_colmap(model, images, splats=args.splats, camera_name=args.camera_name,
+                                              fps=args.fps), args)
         if und is not None:
             src.path = Path(args.model)
             src.notes["undistorted_cameras"] = und.cameras
@@ -159,11 +190,42 @@ def _colmap(args) -> int:
 
 def _nerfstudio(args) -> int:
     from ..importers.nerfstudio import read_nerfstudio
+    from ..importers.undistort import undistorted_views
 
     t0 = time.perf_counter()
     _options(args)
-    src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps)
-    return _finish(src, args, t0)
+    src = read_nerfstudio(args.transforms, splats=args.splats, camera_name=args.camera_name, fps=args.fps,
+                          undistort=args.undistort)
+    views = [v for row in src.grouped.table for v in row]
+    lensed = sum(v.lens is not None for v in views)
+    with undistorted_views(views, args.out) as cameras:
+        if cameras is not None:
+            src.notes["undistorted_cameras"] = cameras
+            models = ", ".join(f"camera {cid} ({c['model']})" for cid, c in cameras.items())
+            print(f"undistorted {lensed} images of {models} to PINHOLE with "
+                  f"COLMAP's undistorter ({time.perf_counter() - t0:.1f} s)")
+        elif args.undistort:
+            print("note: no camera has lens distortion; imported without undistorting")
+        return _finish(_with_lateral_truth(src, args), args, t0, copy_images=cameras is not None)
+
+
+def _kitti(args) -> int:
+    from dataclasses import replace
+
+    from ..importers.ground import camera_up_vectors
+    from ..importers.kitti import read_kitti
+    from ..importers.stereo import split_rig
+
+    t0 = time.perf_counter()
+    opt = _options(args)
+    src, right = read_kitti(args.sequence, args.poses, splats=args.splats, camera_name=args.camera_name,
+                            fps=args.fps)
+    src.grouped, src.lateral = split_rig(src.grouped, right)
+    # KITTI's poses are metric: scale 1. Without points or splats to fit a ground to, the up direction
+    # is the cameras' mean up vector and the ground lies --camera-height below the lowest camera.
+    c2ws = [v.c2w for v in src.grouped.table[0]]
+    up = opt.up or tuple(camera_up_vectors(c2ws).mean(0).tolist())
+    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up))
 
 
 def _gs(args) -> int:

@@ -39,6 +39,7 @@ class View:
     image: Path | None = None  # the recorded image on disk
     camera_id: str = "0"  # the source's camera id
     timestamp: float | None = None
+    lens: tuple[str, list[float]] | None = None  # COLMAP camera model and parameters of a distorted view
 
 
 @dataclass

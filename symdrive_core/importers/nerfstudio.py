@@ -6,7 +6,8 @@ they become OpenCV by flipping the camera's y and z. Intrinsics (``fl_x``, ``fl_
 (3x4, written by ``ns-process-data``) maps the original reconstruction's frame (COLMAP's) to the
 frame of these poses and of ``ply_file_path``; the package's ``source.transform`` maps that
 original frame, and ``source.poses_transform`` the poses' frame, to the package world. A splat PLY
-(``--splats``) is taken to be in the poses' frame. Lens distortion other than zero is refused.
+(``--splats``) is taken to be in the poses' frame. Lens distortion other than zero is refused, or
+kept as the view's COLMAP lens (``undistort``) for :mod:`.undistort` to resample.
 """
 
 from __future__ import annotations
@@ -49,9 +50,26 @@ def _matrix(v, rows: int, path: Path, where: str) -> np.ndarray:
     return out
 
 
-def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[View]]:
+def colmap_lens(model: str, intr: dict, path: Path, where: str) -> tuple[str, list[float]]:
+    """The COLMAP camera model and parameters of a nerfstudio camera with lens distortion."""
+    k = {key: intr[key] or 0.0 for key in DISTORTION_KEYS}
+    fx, fy = intr["fl_x"], intr["fl_y"] if intr["fl_y"] is not None else intr["fl_x"]
+    head = [fx, fy, intr["cx"], intr["cy"]]
+    if model == "OPENCV_FISHEYE":
+        if k["p1"] or k["p2"]:
+            raise InputError(path, "a fisheye camera has no tangential distortion", f"{where}.p1")
+        return "OPENCV_FISHEYE", head + [k["k1"], k["k2"], k["k3"], k["k4"]]
+    if k["k4"]:
+        raise InputError(path, f"camera model {model} has no k4 (OPENCV_FISHEYE has)", f"{where}.k4")
+    if k["k3"]:
+        return "FULL_OPENCV", head + [k["k1"], k["k2"], k["p1"], k["p2"], k["k3"], 0.0, 0.0, 0.0]
+    return "OPENCV", head + [k["k1"], k["k2"], k["p1"], k["p2"]]
+
+
+def read_views(transforms: str | Path, *, undistort: bool = False) -> tuple[Path, dict, np.ndarray, list[View]]:
     """(the transforms.json read, its JSON, applied_transform or identity, its views): poses and
-    intrinsics only, nothing else read (the add-on's *Import Recorded Drive* uses this)."""
+    intrinsics only, nothing else read (the add-on's *Import Recorded Drive* uses this).
+    ``undistort``: views with lens distortion keep it as their ``lens`` instead of being refused."""
     path = Path(transforms)
     if path.is_dir():
         path = path / "transforms.json"
@@ -78,8 +96,9 @@ def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[Vie
         if not isinstance(f, dict):
             raise InputError(path, "expected an object", where)
         model = f.get("camera_model", data.get("camera_model", "OPENCV"))
-        if model not in SUPPORTED_MODELS or model == "OPENCV_FISHEYE":
-            raise InputError(path, f"camera model {model!r} is not imported (pinhole cameras only)",
+        if model not in SUPPORTED_MODELS or (model == "OPENCV_FISHEYE" and not undistort):
+            hint = "; import it with --undistort" if model == "OPENCV_FISHEYE" else ""
+            raise InputError(path, f"camera model {model!r} is not imported (pinhole cameras only{hint})",
                              f"{where}.camera_model")
         intr = {}
         for key in ("fl_x", "fl_y", "cx", "cy", "w", "h", *DISTORTION_KEYS):
@@ -90,10 +109,14 @@ def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[Vie
         missing = [k for k in ("fl_x", "cx", "cy", "w", "h") if intr[k] is None]
         if missing:
             raise InputError(path, f"no {', '.join(missing)} in the frame or at the top level", where)
-        if any(intr[k] for k in DISTORTION_KEYS):
-            nz = [k for k in DISTORTION_KEYS if intr[k]]
-            raise InputError(path, f"camera model {model} with lens distortion ({', '.join(nz)} non-zero) is not "
-                             "imported; undistort the images first", f"{where}.{nz[0]}")
+        lens = None
+        if any(intr[k] for k in DISTORTION_KEYS) or model == "OPENCV_FISHEYE":
+            nz = [k for k in DISTORTION_KEYS if intr[k]] or ["k1"]
+            if not undistort:
+                raise InputError(path, f"camera model {model} with lens distortion ({', '.join(nz)} non-zero) is "
+                                 "not imported; import it with 'symdrive import nerfstudio ... --undistort'",
+                                 f"{where}.{nz[0]}")
+            lens = colmap_lens(model, intr, path, where)
         fy = intr["fl_y"] if intr["fl_y"] is not None else intr["fl_x"]
         K = conventions.intrinsics(intr["fl_x"], fy, intr["cx"], intr["cy"])
         fp = f.get("file_path")
@@ -109,7 +132,7 @@ def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[Vie
         if name.startswith("./"):
             name = name[2:]
         views.append(View(name=name, K=K, width=int(intr["w"]), height=int(intr["h"]), c2w=c2w, source=path,
-                          where=where, image=base / fp, timestamp=None if t is None else float(t)))
+                          where=where, image=base / fp, timestamp=None if t is None else float(t), lens=lens))
     # Views' folder layout is {camera}/{frame} when the dataset has one folder per camera; a single
     # images/ folder is one camera.
     if views and all(v.name.startswith("images/") for v in views):
@@ -119,8 +142,8 @@ def read_views(transforms: str | Path) -> tuple[Path, dict, np.ndarray, list[Vie
 
 
 def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None, camera_name: str = DEFAULT_CAMERA,
-                    fps: float = DEFAULT_FPS) -> Source:
-    path, data, A, views = read_views(transforms)
+                    fps: float = DEFAULT_FPS, undistort: bool = False) -> Source:
+    path, data, A, views = read_views(transforms, undistort=undistort)
     base = path.parent
     points = colors = None
     ply = data.get("ply_file_path")

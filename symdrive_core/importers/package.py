@@ -18,6 +18,7 @@ from ..scene import is_inside
 from .frames import Grouped, split_heldout
 from .ground import align
 from .similarity import apply_camera, apply_points, transform_gaussians
+from .stereo import StereoTruth, lateral_entry
 
 
 @dataclass
@@ -35,6 +36,7 @@ class Source:
     # applied_transform); None: the same frame.
     pre: np.ndarray | None = None
     notes: dict = field(default_factory=dict)
+    lateral: StereoTruth | None = None  # a rig's second camera, written as lateral ground truth
 
 
 @dataclass
@@ -72,8 +74,8 @@ def check_image(image: Path, width: int, height: int, source: Path, where: str) 
         raise InputError(image, f"image is {w}x{h}, the camera ({source}: {where}) is {width}x{height}", where)
 
 
-def _check_images(g: Grouped) -> None:
-    for row in g.table:
+def _check_images(g: Grouped, lateral: StereoTruth | None) -> None:
+    for row in g.table + ([] if lateral is None else [lateral.views]):
         for v in row:
             if v.image is not None:
                 check_image(v.image, v.width, v.height, v.source, v.where)
@@ -97,7 +99,7 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
         if not opt.force:
             raise InputError(out, "a scene package is already there; pass --force to replace it", "--out")
     g = src.grouped
-    _check_images(g)
+    _check_images(g, src.lateral)
     c2ws = np.stack([np.stack([v.c2w for v in row]) for row in g.table])  # [camera, frame, 4, 4]
     pts = None
     if src.points is not None and len(src.points):
@@ -107,29 +109,37 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
     T, record = align(pts, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
     name = opt.name or out.resolve().name
     external = False
-    bar = tqdm(total=sum(len(row) for row in g.table), desc="import", unit="image", disable=not progress)
+    n_images = sum(len(row) for row in g.table) + (0 if src.lateral is None else len(src.lateral.views))
+    bar = tqdm(total=n_images, desc="import", unit="image", disable=not progress)
     with atomic_directory(out) as tmp, bar:
+        def place(image: Path, copy_as: str) -> str:
+            """The package's path of a recorded image: copied to ``copy_as``, linked when it is
+            inside the package already, else referenced relative to the package."""
+            nonlocal external
+            bar.update()
+            if opt.copy_images:
+                dst = tmp / copy_as
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(image, dst)
+                return copy_as
+            if is_inside(image, out):
+                rel = image.resolve().relative_to(out.resolve()).as_posix()
+                link_or_copy(image, tmp / rel)
+                return rel
+            external = True
+            return Path(os.path.relpath(image.resolve(), out.resolve())).as_posix()
+
         cams = []
         for cam, row in zip(g.cameras, g.table):
             frames = []
             for fi, v in enumerate(row):
-                bar.update()
                 c2w = apply_camera(T, v.c2w)
                 entry = {"K": v.K.tolist(), "camera_to_world": c2w.tolist(),
                          "world_to_camera": conventions.invert_rigid(c2w).tolist()}
-                if v.image is not None:
-                    if opt.copy_images:
-                        rel = f"images/{cam}/{fi:06d}{v.image.suffix.lower()}"
-                        dst = tmp / rel
-                        dst.parent.mkdir(parents=True, exist_ok=True)
-                        shutil.copy2(v.image, dst)
-                    elif is_inside(v.image, out):
-                        rel = v.image.resolve().relative_to(out.resolve()).as_posix()
-                        link_or_copy(v.image, tmp / rel)
-                    else:
-                        rel = Path(os.path.relpath(v.image.resolve(), out.resolve())).as_posix()
-                        external = True
-                    entry["image"] = rel
+                if v.image is None:
+                    bar.update()
+                else:
+                    entry["image"] = place(v.image, f"images/{cam}/{fi:06d}{v.image.suffix.lower()}")
                 frames.append(entry)
             cams.append({"name": cam, "width": row[0].width, "height": row[0].height, "frames": frames})
         background = {}
@@ -151,10 +161,16 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
                        "frame_names": list(g.frame_keys), **record, **src.notes},
             "ground_truth": {"camera": g.cameras[0], "train_frames": train, "heldout_frames": held},
         }
+        if src.lateral is not None:
+            entry = lateral_entry(src.lateral, record["scale"], place)
+            data["ground_truth"]["lateral"] = [entry]
+            data["effects"] = {"lateral_offsets": [entry["offset_m"]]}
+            data["source"]["stereo"] = {"camera": src.lateral.name, "baseline_source_units": src.lateral.baseline}
         m = parse_manifest(data, tmp / "manifest.json", allow_external=external)
         m.save()
         m = load_manifest(tmp, allow_external=external)
         check_files(m)
     return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
+            "lateral_offset_m": None if src.lateral is None else data["effects"]["lateral_offsets"][0],
             "scale": record["scale"], "camera_height_m": record["camera_height_m"],
             "ground_fit": record["ground_fit"], "external_images": external, "transform": T}
