@@ -212,7 +212,9 @@ def _nerfstudio(args) -> int:
 def _kitti(args) -> int:
     from dataclasses import replace
 
-    from ..importers.ground import camera_up_vectors
+    import numpy as np
+
+    from ..importers.ground import path_up
     from ..importers.kitti import read_kitti
     from ..importers.stereo import split_rig
 
@@ -221,10 +223,10 @@ def _kitti(args) -> int:
     src, right = read_kitti(args.sequence, args.poses, splats=args.splats, camera_name=args.camera_name,
                             fps=args.fps)
     src.grouped, src.lateral = split_rig(src.grouped, right)
-    # KITTI's poses are metric: scale 1. Without points or splats to fit a ground to, the up direction
-    # is the cameras' mean up vector and the ground lies --camera-height below the lowest camera.
-    c2ws = [v.c2w for v in src.grouped.table[0]]
-    up = opt.up or tuple(camera_up_vectors(c2ws).mean(0).tolist())
+    # KITTI's poses are metric: scale 1, and the ground --camera-height below the cameras' median
+    # height. Its plane is the one the camera path rides on (points need not be triangulated).
+    c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
+    up = opt.up or tuple(path_up(c2ws).tolist())
     return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up))
 
 

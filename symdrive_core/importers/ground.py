@@ -124,6 +124,25 @@ def path_scatter(paths: np.ndarray) -> np.ndarray:
     return np.einsum("cfi,cfj->ij", rel, rel) / (paths.shape[0] * paths.shape[1])
 
 
+def path_up(c2ws, turn_ratio: float = 0.05) -> np.ndarray:
+    """The road's up direction from the camera path alone, for a drive with no points to fit.
+
+    A camera's own up vector is tilted by its pitch (a degree of pitch puts the ground 0.9 m off
+    over 50 m of drive), but the path is level along the drive: where the path turns enough to
+    span a plane (its second extent at least ``turn_ratio`` of its first), that plane's normal;
+    on a straight path, the cameras' mean up with its component along the drive removed. Its
+    sign follows the cameras' up."""
+    hint = _unit(camera_up_vectors(c2ws).mean(axis=0))
+    extent, axes = np.linalg.eigh(path_scatter(camera_paths(c2ws)))  # ascending
+    if extent[1] >= turn_ratio ** 2 * extent[2]:
+        n = axes[:, 0]
+    else:
+        travel = axes[:, 2]
+        n = hint - (hint @ travel) * travel
+    n = _unit(n)
+    return n if n @ hint > 0 else -n
+
+
 def under_path(points: np.ndarray, paths: np.ndarray, up: np.ndarray, max_segments: int,
                chunk: int = 1024) -> tuple[np.ndarray, np.ndarray]:
     """Per point: horizontal distance to the nearest camera path segment, and depth below it there."""

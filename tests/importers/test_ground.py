@@ -134,3 +134,27 @@ def test_mostly_clutter_under_the_path_still_finds_the_road(tmp_path):
     assert abs(rec["scale"] - 1) < 0.005, rec
     q = rec["ground_fit"]
     assert q["inlier_fraction"] < 0.3 and any("points under the path on it" in w for w in q["weak"]), q
+
+
+def test_path_up_ignores_the_cameras_pitch():
+    """A camera pitched 3 degrees down on a road climbing 2 %: the up from the path is the road's
+    normal, not the cameras' up; on a curve too."""
+    from symdrive_core.importers.ground import path_up
+
+    def c2w(position, forward, pitch_deg):
+        f = np.asarray(forward, float) / np.linalg.norm(forward)
+        left = np.cross([0.0, 0.0, 1.0], f)
+        left /= np.linalg.norm(left)
+        a = np.deg2rad(pitch_deg)
+        f = np.cos(a) * f - np.sin(a) * np.cross(f, left)  # pitched down
+        up = np.cross(f, left)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = -left, -up, f, position  # OpenCV: x right, y down, z forward
+        return m
+
+    road = np.array([-0.02, 0.0, 1.0]) / np.linalg.norm([-0.02, 0.0, 1.0])  # climbing 2 % along +x
+    straight = np.stack([c2w([x, 0.0, 0.02 * x + 1.6], [1.0, 0.0, 0.02], 3.0) for x in np.linspace(0, 50, 26)])
+    assert np.degrees(np.arccos(np.clip(path_up(straight) @ road, -1, 1))) < 0.01
+    t = np.linspace(0, np.pi / 2, 30)
+    curve = np.stack([c2w([30 * np.sin(a), 30 * (1 - np.cos(a)), 1.6], [np.cos(a), np.sin(a), 0.0], 3.0) for a in t])
+    assert np.degrees(np.arccos(np.clip(path_up(curve)[2], -1, 1))) < 0.01
