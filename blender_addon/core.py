@@ -32,7 +32,7 @@ ply = importlib.import_module(f"{CORE}.io.ply")
 atomic = importlib.import_module(f"{CORE}.io.atomic")
 scene = importlib.import_module(f"{CORE}.scene")
 poses = importlib.import_module(f"{CORE}.scene.poses")
-wlh = importlib.import_module(f"{CORE}.insertion.wlh")
+wlh = importlib.import_module(f"{CORE}.io.wlh")
 fcd = importlib.import_module(f"{CORE}.traffic.fcd")
 
 

@@ -3,7 +3,7 @@
     python scripts/bench_render.py --quick            # ~1 minute subset
     python scripts/bench_render.py --json out.json    # everything (several minutes)
 
-Reports today's frame against the baseline frame (``symdrive_core.splat.rasterize_baseline``: the
+Reports today's frame against the baseline frame (``symdrive_core.bench.rasterize_baseline``: the
 pixel-outer kernels of ``kernels_baseline`` and the shared path as it was), same scene, same thread
 count, alternating runs: the whole forward and forward+backward, the part outside the compositing
 kernels and the kernels alone, with the ratios; the first
@@ -37,12 +37,12 @@ from symdrive_core.splat import (
     GaussianTensors,
     Layer,
     kernels,
-    kernels_baseline,
     rasterize,
     render_layers,
     render_oracle,
 )
-from symdrive_core.splat.rasterize_baseline import rasterize_baseline
+from symdrive_core.bench import kernels_baseline
+from symdrive_core.bench.rasterize_baseline import rasterize_baseline
 
 
 def make_scene(n, width, height, seed=0, deg=3, dtype=torch.float32, fov_deg=70.0):

@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from symdrive_core.scene.road import Road
 from symdrive_core.traffic.actors import traffic_actors
 from symdrive_core.traffic.assets import Asset
 from symdrive_core.traffic.overlap import check_actors
-from symdrive_core.traffic.road import Road
 from symdrive_core.traffic.simulate import TrafficOptions, simulate
 
 LANES = 2

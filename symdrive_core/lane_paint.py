@@ -27,7 +27,7 @@ import numpy as np
 
 from . import conventions
 from .metrics import mask_iou
-from .traffic.road import Road, project_onto
+from .scene.road import Road, project_onto
 
 
 @dataclass(frozen=True)
@@ -109,3 +109,13 @@ class LaneTruth:
     def iou(self, image: np.ndarray) -> float:
         """Lane IoU of ``image`` (the segmenter's mask against the truth)."""
         return mask_iou(segment_lane_paint(image, self.region, self.config), self.mask)
+
+
+def lane_truth(manifest, mask: str, K, camera_to_world) -> LaneTruth:
+    """The package's lane mask ``mask`` (relative to it) of the camera (K, camera_to_world), with
+    the road region of the package's ``ground_truth.road`` it is scored in."""
+    from .io.images import read_mask
+    from .scene.road import road_from_json
+
+    road = road_from_json(manifest.ground_truth["road"], manifest.path or manifest.root)
+    return LaneTruth.for_camera(read_mask(manifest.resolve(mask)) > 0.5, K, camera_to_world, road)

@@ -1,4 +1,7 @@
-"""Accuracy against time: each knob's settings measured on a package (``symdrive accuracy-time``).
+"""Measurements of the pipeline, not the pipeline: accuracy against time knob by knob
+(``symdrive bench accuracy-time``: :mod:`.knobs`, :mod:`.accuracy_time`) and the renderer's
+baseline frame that ``scripts/bench_render.py`` times today's kernels against
+(:mod:`.kernels_baseline`, :mod:`.rasterize_baseline`).
 
-Benchmarks, not the pipeline: nothing under ``pipeline/`` imports this package.
+Nothing under ``pipeline/`` imports this package.
 """

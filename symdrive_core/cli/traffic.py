@@ -34,10 +34,10 @@ def _traffic(args) -> int:
 
     from ..errors import InputError
     from ..scene import load_manifest
+    from ..scene.road import road_from_json, road_from_spec
     from ..traffic.assets import asset_pool
     from ..traffic.manoeuvre_spec import load_manoeuvres
     from ..traffic.package import check_output_path, traffic_manifest, write_package
-    from ..traffic.road import road_from_json, road_from_spec
     from ..traffic.simulate import DEFAULT_SPEED, TrafficOptions, simulate
 
     src = load_manifest(args.package, allow_external=args.allow_external_assets)

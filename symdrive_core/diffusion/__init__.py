@@ -2,10 +2,13 @@
 
 Modules: ``flow`` (schedule, Euler sampler, N_start initialisation), ``latent`` (pixel space /
 Flux VAE), ``unet`` (the built-in network), ``models`` (backends and ``load_restorer``),
-``flux`` (Flux.1-dev + LoRA), ``sampler`` (images in, image out), ``data`` (training pairs),
-``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS refinement
-on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers outside read
-without torch; the command line is ``cli/diffusion.py``).
+``flux`` (Flux.1-dev + LoRA), ``flux_prompt`` (its prompt embeddings from local text encoders),
+``flux_train`` (its LoRA training), ``sampler`` (images in, image out), ``tiling`` (overlapping
+tiles under a memory budget), ``data`` (training pairs), ``cycle`` (degraded starts from cycle
+reconstructions), ``warp`` (recorded neighbours warped over the ground: the guided chain's
+geometry), ``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS
+refinement on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers
+outside read without torch; the command line is ``cli/diffusion.py``).
 
 Design of the built-in backend, which must train on a CPU in minutes and ship in a few MB:
 

@@ -14,9 +14,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..gaussians import Gaussians
+from ..io.mesh import read_mesh
 from ..io.ply import read_splats
 from ..traffic.assets import load_asset
-from .mesh_to_splats import mesh_to_splats, read_mesh
+from .mesh_to_splats import mesh_to_splats
 
 # Half turn about Z: (x, y, z) -> (-x, -y, z); quaternion (w, x, y, z) = (0, 0, 0, 1).
 HALF_TURN_Z = np.array([0.0, 0.0, 0.0, 1.0])

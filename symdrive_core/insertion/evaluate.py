@@ -90,7 +90,7 @@ def evaluate_insertion(manifest: Manifest, background_gaussians, restorer=None, 
                        config: InsertionConfig | None = None, extractor=None, details: dict | None = None,
                        progress: bool = True) -> list[dict]:
     """Rows ``{"method", "masked_psnr", "masked_ssim", "psnr"[, "frechet"]}`` averaged over the
-    package's held-out placements (REPORT.md's ``metrics.insertion``).
+    package's held-out placements (report.json's ``metrics.insertion``).
 
     ``restorer`` is the diffusion model (or pass a ready ``harmonizer``); without either only the
     naive and colour-transfer rows are measured. ``extractor`` adds a Frechet distance between

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..gaussians import Gaussians
 from ..io.images import read_image
+from ..lane_paint import lane_truth
 from ..metrics import psnr, ssim
 from ..scene import Manifest
 from ..scene.camera import CameraView
@@ -48,7 +49,8 @@ def lateral_targets(manifest: Manifest, frames: list[int] | None) -> list:
 def lane_truths(manifest: Manifest, targets: list) -> dict:
     """(offset, frame) -> lane truth of every target view that has a lane mask, all read before
     any view is rendered or restored (a missing mask stops the run before its work)."""
-    return {(v.offset_m, v.frame): v.lane_truth(manifest) for v in targets if v.lanes is not None}
+    return {(v.offset_m, v.frame): lane_truth(manifest, v.lanes, v.K, v.camera_to_world)
+            for v in targets if v.lanes is not None}
 
 
 def with_ceiling(lanes, gt: np.ndarray, offset: float, ceilings: dict[float, list[float]]):

@@ -32,7 +32,7 @@ def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: 
     The default speed is 1.1 times the recording camera's, so the car pulls slowly away from it."""
     from ..rotations import quat_from_yaw
     from ..scene.poses import Pose
-    from ..traffic.road import road_from_json
+    from ..scene.road import road_from_json
 
     if speed_mps is None:
         centres = [f.camera_to_world[:3, 3] for f in manifest.cameras[0].frames]

@@ -98,7 +98,7 @@ def check_renderable(manifest: Manifest) -> None:
     """Every actor can be rendered: it names a readable splat PLY (what it renders from), or no
     splats and a readable mesh (sampled into splats at render time). Otherwise the plan stops,
     naming the actor and why (``ManifestError`` at ``actors[i].assets``: exit 2)."""
-    from ..insertion.mesh_to_splats import read_mesh
+    from ..io.mesh import read_mesh
 
     for i, a in enumerate(manifest.actors):
         if a.splats:
@@ -131,7 +131,7 @@ def actor_local_box(manifest: Manifest, actor) -> tuple[np.ndarray, np.ndarray]:
     if actor.wlh is not None:
         return vehicle_local_box(actor.wlh)
     if not actor.splats:
-        from ..insertion.mesh_to_splats import read_mesh
+        from ..io.mesh import read_mesh
 
         verts = read_mesh(manifest.resolve(actor.mesh)).verts
         return verts.min(axis=0), verts.max(axis=0)

@@ -1,4 +1,4 @@
-"""``report.json``: what ran, why, how long, and what was measured (shape in REPORT.md).
+"""``report.json``: what ran, why, how long, and what was measured (its shape: docs/cli.md).
 
 Only measured numbers go in; a metric that could not be measured is left out.
 """

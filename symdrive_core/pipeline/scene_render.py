@@ -46,7 +46,8 @@ def actor_splats(manifest: Manifest, actor, cache_dir: Path | None = None, *, n_
                  seed: int = MESH_SEED) -> Gaussians:
     """An actor's Gaussians in its own frame: its splat PLY, else its mesh sampled into splats
     (read back from ``cache_dir`` when an earlier call wrote them there)."""
-    from ..insertion.mesh_to_splats import mesh_to_splats, read_mesh
+    from ..insertion.mesh_to_splats import mesh_to_splats
+    from ..io.mesh import read_mesh
     from ..io.ply import write_splats
 
     if actor.splats:

@@ -51,10 +51,6 @@ class LateralView(SeenBy):
     image: str  # ground truth, relative to the package
     lanes: str | None = None  # its exact lane-marking mask, relative to the package
 
-    def lane_truth(self, manifest: Manifest):
-        """The view's :class:`~symdrive_core.lane_paint.LaneTruth` (None without a lane mask)."""
-        return None if self.lanes is None else lane_truth(manifest, self.lanes, self.K, self.camera_to_world)
-
 
 def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
     """(camera, offset_m, frame) -> lane mask path: offset 0.0 for the recorded views."""
@@ -64,16 +60,6 @@ def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
     for e in lanes.get("lateral", []):
         out.update({(e.get("camera", camera), float(e["offset_m"]), int(k)): rel for k, rel in e["frames"].items()})
     return out
-
-
-def lane_truth(manifest: Manifest, mask: str, K, camera_to_world):
-    """The lane mask ``mask`` of the camera (K, camera_to_world) with the road region it is scored in."""
-    from ..io.images import read_mask
-    from ..lane_paint import LaneTruth
-    from ..traffic.road import road_from_json
-
-    road = road_from_json(manifest.ground_truth["road"], manifest.path or manifest.root)
-    return LaneTruth.for_camera(read_mask(manifest.resolve(mask)) > 0.5, K, camera_to_world, road)
 
 
 def lateral_views(manifest: Manifest) -> list[LateralView]:

@@ -98,7 +98,7 @@ class IDMAgent(Agent):
         s_ego = env.route.progress(e.xy)
         best = None
         half_lane = 0.5 * env.area.lane_width
-        from ..traffic.road import project_onto
+        from ..scene.road import project_onto
 
         for a in env.actors:
             lat, _, _ = project_onto(env.route.xy, a.xy[None])

@@ -167,7 +167,7 @@ class SymDriveEnv(gym.Env):
 
     def lateral_offset_from_route(self, state: EgoState | None = None) -> float:
         s = state or self.ego
-        from ..traffic.road import project_onto
+        from ..scene.road import project_onto
 
         lat, _, _ = project_onto(self.route.xy, np.array([[s.x, s.y]]))
         return float(lat[0])

@@ -1,7 +1,7 @@
 """Where the ego may drive and where it is going.
 
 The drivable area is the package's road (``ground_truth.road``, read by
-:func:`symdrive_core.traffic.road.road_from_json`): every lane across it, centred on its centre
+:func:`symdrive_core.scene.road.road_from_json`): every lane across it, centred on its centre
 line. A package without a road gets a corridor ``corridor_half_width_m`` each side of the
 recorded ego path instead. The route is the recorded ego path; progress is the arc length of
 the ego's projection onto it.
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..traffic.road import Road, arc_lengths, project_onto, road_from_json
+from ..scene.road import Road, arc_lengths, project_onto, road_from_json
 
 
 @dataclass

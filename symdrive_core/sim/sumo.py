@@ -22,10 +22,10 @@ import numpy as np
 
 from ..rotations import quat_from_yaw
 from ..scene.poses import Pose
+from ..scene.road import Road
 from ..traffic.demand import MIN_GAP_M
 from ..traffic.fcd import yaw_from_sumo_angle
 from ..traffic.network import build_network, lane_length
-from ..traffic.road import Road
 from ..traffic.sumo_run import traci_session
 from .traffic import ActorState
 

@@ -56,7 +56,7 @@ def birds_eye(env, record: dict, size: int, metres: float = 40.0) -> np.ndarray:
         return np.stack([size / 2 - left * scale, size * 0.65 - fwd * scale], axis=1)
 
     line, hw = env.area.line, env.area.half_width
-    from ..traffic.road import offset_polyline
+    from ..scene.road import offset_polyline
 
     lo, hi = offset_polyline(line, -hw), offset_polyline(line, hw)
     for i in range(len(line) - 1):

@@ -15,9 +15,9 @@ import numpy as np
 
 from ..rotations import quat_from_yaw
 from ..scene import Actor, Pose
+from ..scene.road import Road
 from .assets import Asset
 from .fcd import Track, sample_track
-from .road import Road
 
 
 def track_poses(track: Track, asset: Asset, road: Road, times: np.ndarray, net_offset=(0.0, 0.0)) -> list[Pose | None]:

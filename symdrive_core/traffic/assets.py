@@ -1,6 +1,6 @@
 """The pool of vehicle assets traffic draws from: 3DRealCar-layout folders with ``wlh.json``.
 
-A folder holds ``wlh.json`` (read by :mod:`symdrive_core.insertion.wlh`:
+A folder holds ``wlh.json`` (read by :mod:`symdrive_core.io.wlh`:
 ``{"wlh": [w, l, h], "splats": "splats.ply", "mesh": "mesh.obj"}``, the file names optional) and
 the splat PLY and/or mesh it names. Each SUMO vehicle type is one asset, so the simulated vehicle
 has exactly the asset's length and width.
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..insertion.wlh import read_wlh_info
+from ..io.wlh import read_wlh_info
 
 # File names looked for when ``wlh.json`` names none (the first that exists is taken).
 DEFAULT_FILES = {"splats": ("splats.ply",), "mesh": ("mesh.obj", "mesh.glb", "mesh.gltf", "mesh.ply")}

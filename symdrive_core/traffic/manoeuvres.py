@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SymDriveError
+from ..scene.road import project_onto
 from .fcd import yaw_from_sumo_angle
 from .manoeuvre_spec import Manoeuvre
-from .road import project_onto
 
 # Lane-change modes (bits 8-9 say how a TraCI request treats others; bits 0-7 = 0 switch off the
 # vehicle's own strategic, cooperative, speed-gain and keep-right changes, so it stays put after).

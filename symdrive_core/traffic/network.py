@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .road import Road, offset_polyline
+from ..scene.road import Road, offset_polyline
 from .sumo_run import run_tool
 
 NETCONVERT_TIMEOUT_S = 60.0

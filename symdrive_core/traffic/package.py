@@ -21,10 +21,10 @@ from ..errors import InputError
 from ..io import link_or_copy
 from ..io.atomic import atomic_directory
 from ..scene import CameraFrame, Manifest, check_files, parse_manifest
+from ..scene.road import Road
 from .actors import traffic_actors
 from .assets import Asset
 from .overlap import GapReport, check_actors, require_no_overlap
-from .road import Road
 from .simulate import TrafficOptions, TrafficRun
 
 KEPT_SUMO_FILES = ("road.net.xml", "routes.rou.xml")

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..scene.road import Road
 from .assets import Asset
 from .demand import write_routes
 from .fcd import Track, read_fcd
 from .manoeuvre_spec import Manoeuvre
 from .manoeuvres import Director
 from .network import Network, build_network, lane_length
-from .road import Road
 from .sumo_run import run_tool, traci_session
 
 DEFAULT_SPEED = 13.89  # m/s, 50 km/h

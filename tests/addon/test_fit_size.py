@@ -171,7 +171,7 @@ def test_mesh_only_actor_is_exported_as_a_glb_in_its_own_frame(blender, tmp_path
     actor = m.actors[0]
     assert actor.splats is None and actor.mesh == "assets/truck/mesh.glb"
     # Read back as the backend reads it (glTF's +Y up turned to Z up): the car's own frame.
-    from symdrive_core.insertion.mesh_to_splats import read_mesh
+    from symdrive_core.io.mesh import read_mesh
 
     verts = read_mesh(m.resolve(actor.mesh)).verts
     lo, hi = verts.min(axis=0), verts.max(axis=0)

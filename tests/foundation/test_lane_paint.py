@@ -7,7 +7,7 @@ import pytest
 from symdrive_core import conventions
 from symdrive_core.lane_paint import LaneTruth, road_region, segment_lane_paint
 from symdrive_core.metrics import mask_iou
-from symdrive_core.traffic.road import Road
+from symdrive_core.scene.road import Road
 
 W, H = 160, 96
 K = conventions.intrinsics_from_fov(W, H, np.deg2rad(70.0))

@@ -6,7 +6,8 @@ import numpy as np
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.insertion.mesh_to_splats import TriMesh, mesh_to_splats
+from symdrive_core.insertion.mesh_to_splats import mesh_to_splats
+from symdrive_core.io.mesh import TriMesh
 from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Pose
 from symdrive_core.scene.camera import CameraView

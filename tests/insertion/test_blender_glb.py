@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from symdrive_core.conventions import linear_to_srgb
-from symdrive_core.insertion.mesh_to_splats import mesh_to_splats, read_mesh
+from symdrive_core.insertion.mesh_to_splats import mesh_to_splats
+from symdrive_core.io.mesh import read_mesh
 
 pytestmark = pytest.mark.blender
 

@@ -10,12 +10,8 @@ import pytest
 from symdrive_core.conventions import linear_to_srgb
 from symdrive_core.errors import InputError
 from symdrive_core.insertion.assets import load_vehicle_asset
-from symdrive_core.insertion.mesh_to_splats import (
-    mesh_to_splats,
-    read_mesh,
-    read_obj,
-    sample_colors,
-)
+from symdrive_core.insertion.mesh_to_splats import mesh_to_splats, sample_colors
+from symdrive_core.io.mesh import read_mesh, read_obj
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -192,7 +188,7 @@ def test_asset_folder_with_only_a_glb(tmp_path):
 def test_an_obj_material_library_outside_its_folder_is_not_read(tmp_path):
     """``mtllib`` in a downloaded OBJ is data: a library beside the file is read, one that climbs
     out of its folder is not (the mesh keeps the default colour)."""
-    from symdrive_core.insertion.mesh_to_splats import read_obj
+    from symdrive_core.io.mesh import read_obj
 
     (tmp_path / "pkg").mkdir()
     for where, name in ((tmp_path, "outside.mtl"), (tmp_path / "pkg", "beside.mtl")):

@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from symdrive_core.splat import kernels, kernels_baseline, rasterize_baseline
+from symdrive_core.bench import kernels_baseline, rasterize_baseline
+from symdrive_core.splat import kernels
 
 THRESHOLD = 1.0 / 255.0
 N_GROUPS = 3

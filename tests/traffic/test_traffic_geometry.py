@@ -8,6 +8,14 @@ from hypothesis import strategies as st
 from symdrive_core.errors import InputError
 from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Actor, Pose
+from symdrive_core.scene.road import (
+    Road,
+    arc_points,
+    offset_polyline,
+    project_onto,
+    road_from_json,
+    road_from_spec,
+)
 from symdrive_core.traffic.fcd import read_fcd
 from symdrive_core.traffic.overlap import (
     OverlapError,
@@ -15,14 +23,6 @@ from symdrive_core.traffic.overlap import (
     footprints,
     frame_gaps,
     require_no_overlap,
-)
-from symdrive_core.traffic.road import (
-    Road,
-    arc_points,
-    offset_polyline,
-    project_onto,
-    road_from_json,
-    road_from_spec,
 )
 
 

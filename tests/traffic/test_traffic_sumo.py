@@ -9,7 +9,7 @@ import pytest
 from symdrive_core.cli import main
 from symdrive_core.scene import check_files, load_manifest
 from symdrive_core.scene.poses import yaw_of
-from symdrive_core.traffic.road import project_onto, road_from_json
+from symdrive_core.scene.road import project_onto, road_from_json
 from symdrive_core.traffic.sumo_run import SumoError, run_tool
 from tests.traffic.scenes import CAR, VAN, curved_road, write_asset, write_package, write_pool
 

@@ -8,9 +8,10 @@ import pytest
 
 from symdrive_core.errors import InputError
 from symdrive_core.io.images import read_image
+from symdrive_core.lane_paint import lane_truth
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
-from symdrive_core.scene.ground_truth import lane_masks, lane_truth, lateral_views
+from symdrive_core.scene.ground_truth import lane_masks, lateral_views
 
 MANIFEST = load_manifest(DEMO_PACKAGE)
 RECORDED = [0, 7, 14, 21, 28]
@@ -24,7 +25,7 @@ def _recorded(i: int):
 
 
 def _lateral(v):
-    return v.lane_truth(MANIFEST), read_image(MANIFEST.resolve(v.image), channels=3)
+    return lane_truth(MANIFEST, v.lanes, v.K, v.camera_to_world), read_image(MANIFEST.resolve(v.image), channels=3)
 
 
 def test_every_ground_truth_view_has_a_lane_mask():
@@ -59,8 +60,9 @@ def test_a_missing_lane_mask_stops_restore_evaluate_with_exit_2(tmp_path, capsys
     gone = lane_masks(MANIFEST)[("front", 0.5, 12)]
     (pkg / gone).unlink()
     copy = load_manifest(pkg)
+    v = next(v for v in lateral_views(copy) if v.lanes == gone)
     with pytest.raises(InputError, match="file not found"):
-        next(v for v in lateral_views(copy) if v.lanes == gone).lane_truth(copy)
+        lane_truth(copy, v.lanes, v.K, v.camera_to_world)
     out = tmp_path / "eval"
     assert main(["restore", str(pkg), "--frames", "12", "--evaluate", "--out", str(out)]) == 2
     err = capsys.readouterr().err

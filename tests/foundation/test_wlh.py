@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from symdrive_core.errors import InputError
-from symdrive_core.insertion.wlh import read_wlh, read_wlh_info
+from symdrive_core.io.wlh import read_wlh, read_wlh_info
 from symdrive_core.traffic.assets import load_asset
 
 DEMO = Path(__file__).resolve().parents[2] / "symdrive_core/data/demo_street/assets"

@@ -17,12 +17,13 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from . import kernels, kernels_baseline
-from .constants import ALPHA_THRESHOLD, TILE_SIZE
-from .numba_scope import KernelScope
-from .projection import project_gaussians
-from .rasterizer import _np, _rows_finite
-from .sh import sh_to_color
+from ..splat import kernels
+from ..splat.constants import ALPHA_THRESHOLD, TILE_SIZE
+from ..splat.numba_scope import KernelScope
+from ..splat.projection import project_gaussians
+from ..splat.rasterizer import _np, _rows_finite
+from ..splat.sh import sh_to_color
+from . import kernels_baseline
 
 
 @njit(parallel=True, cache=True)

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..conventions import PIXEL_CENTER_OFFSET
-from .kernels import ALPHA_MAX, T_STOP, sigma_limit
+from ..splat.kernels import ALPHA_MAX, T_STOP, sigma_limit
 
 
 @njit(parallel=True, cache=True)
