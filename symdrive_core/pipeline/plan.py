@@ -6,6 +6,7 @@ never loads a diffusion model for a scene that needs none.
 
 * no inserted actor (or harmonization off)   -> no harmonize / finetune, no diffusion model
 * no lateral offsets                          -> no restore / refine
+* restorer weights trained on another drive   -> adapt them to this one (its recorded frames)
 * actor outside every frustum in a frame      -> not rendered, not harmonized in that frame
 * no sun                                      -> no shadow region in the harmonization mask
 * every asset SH degree 0                     -> no SH evaluation (colour is the DC term)
@@ -25,7 +26,7 @@ from ..io.ply import read_header, read_splats
 from ..scene import Manifest, ManifestError, box_corners_world, box_in_frustum, vehicle_local_box
 from .cache_key import inputs_key
 
-STAGES = ("reconstruct", "render", "cast_shadow", "restore", "refine", "harmonize", "finetune",
+STAGES = ("reconstruct", "render", "cast_shadow", "adapt", "restore", "refine", "harmonize", "finetune",
           "sh_eval", "evaluate")
 DIFFUSION_STAGES = ("restore", "harmonize")
 # Sub-effects decided here but applied inside another stage (no runner of their own); they are
@@ -47,6 +48,7 @@ class StageDecision:
 class PlanOptions:
     refine: bool = True
     evaluate: bool = True
+    adapt: bool = True  # fine-tune the restorer on a drive its weights were not trained on
     near: float = NEAR_PLANE
 
 
@@ -176,6 +178,33 @@ def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
                          f"{eff.shade:.2f} of the light)", frames, seen)
 
 
+def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: bool) -> StageDecision:
+    """Fine-tune the restorer on this drive's own pairs when its weights record another drive."""
+    from ..diffusion.adapt import drive_identity, shipped_weights, trained_drive
+    from ..scene.ground_truth import split_frames, truth_camera
+
+    if not restores:
+        return StageDecision("adapt", False, "no lateral views to restore")
+    if not opt.adapt:
+        return StageDecision("adapt", False, "adaptation disabled")
+    cam, train = truth_camera(manifest), split_frames(manifest)[0]
+    if not train or not all(cam.frames[i].image for i in train):
+        return StageDecision("adapt", False, f"camera {cam.name!r} has no recorded image in every training frame "
+                             "to adapt the restorer on")
+    if reconstructs:
+        return StageDecision("adapt", True, "the reconstruction is fitted in this run: the restorer learns "
+                             "its renders of this drive", train)
+    if not manifest.background_splats:
+        return StageDecision("adapt", False, "no reconstruction to render training pairs from")
+    drive = drive_identity(manifest, manifest.resolve(manifest.background_splats))
+    seen = trained_drive(shipped_weights(guided=True))
+    if seen is not None and seen.get("identity") == drive["identity"]:
+        return StageDecision("adapt", False, f"the restorer was trained on this drive ({drive['identity']})")
+    trained_on = f"{seen.get('scene')!r} ({seen.get('identity')})" if seen else "an unrecorded drive"
+    return StageDecision("adapt", True, f"the restorer was trained on {trained_on}, not on this drive "
+                         f"({drive['identity']})", train)
+
+
 def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None,
               key: str | None = None) -> Plan:
     """Decide every stage for this scene. ``previous`` is the last run's state and ``key`` this
@@ -199,6 +228,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
                                 sorted({a for cam in visible.values() for ids in cam.values() for a in ids})))
     stages.append(_cast_shadow(manifest, visible))
 
+    stages.append(_adapt(manifest, opt, bool(eff.lateral_offsets), stages[0].run))
     if eff.lateral_offsets:
         offs = ", ".join(f"{o:g}" for o in eff.lateral_offsets)
         stages.append(StageDecision("restore", True, f"lateral offsets {offs} m requested", frames_all))
