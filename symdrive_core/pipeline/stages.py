@@ -196,9 +196,10 @@ def adapt_stage(ctx) -> StageResult:
     record = adapt_restorer(m, background(ctx), drive_identity(m, background_path(ctx)), folder, opts.adapt,
                             guided=guided, progress=ctx.progress)
     ctx.shared.restorer = None  # restorer() loads the adapted weights
-    details = {k: record[k] for k in ("steps", "final_loss", "seconds", "pairs_seconds") if k in record}
+    made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"], "train_seconds": record["seconds"]}
     return StageResult({"reused": record["reused"], "guided": guided, "pairs": record["data"]["pairs"],
-                        "weights": folder.relative_to(ctx.tree.root).as_posix(), **details})
+                        "steps": record["steps"], "final_loss": record["final_loss"],
+                        "weights": folder.relative_to(ctx.tree.root).as_posix(), **made})
 
 
 @stage("restore")
