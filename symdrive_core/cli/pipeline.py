@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from ..diffusion.adapt import AdaptConfig
 from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_json_option, add_quiet_option, positive_int
 
@@ -15,6 +16,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
+    p.add_argument("--no-adapt", action="store_true", help="plan without adapting the restorer to the drive")
     add_json_option(p, "the plan")
     add_external_assets_option(p)
     p.set_defaults(func=_plan)
@@ -24,6 +26,13 @@ def add_commands(sub) -> None:
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--no-refine", action="store_true", help="run without 3DGS refinement")
+    p.add_argument("--no-adapt", action="store_true",
+                   help="restore with the shipped restorer even on a drive its weights were not trained on")
+    p.add_argument("--adapt-iters", type=positive_int,
+                   help=f"training iterations of the restorer's adaptation (default {AdaptConfig.iters})")
+    p.add_argument("--adapt-seconds", type=float, metavar="S",
+                   help="time budget of the adaptation, its pairs included "
+                        f"(default {AdaptConfig.max_seconds:g})")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
@@ -70,7 +79,7 @@ def _plan(args) -> int:
     from . import write_json
 
     plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
-                     PlanOptions(refine=not args.no_refine))
+                     PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt))
     if args.json:
         write_json(plan.to_json(), args.json)
     else:
@@ -79,12 +88,17 @@ def _plan(args) -> int:
 
 
 def _run(args) -> int:
+    from dataclasses import replace
+
     from ..pipeline.plan import PlanOptions
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
 
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
-    report = run_scene(args.package, args.out, options=PlanOptions(refine=not args.no_refine),
+    budget = {"iters": args.adapt_iters, "max_seconds": args.adapt_seconds}
+    stage_options.adapt = replace(stage_options.adapt, **{k: v for k, v in budget.items() if v is not None})
+    options = PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt)
+    report = run_scene(args.package, args.out, options=options,
                        device=args.device, progress=not args.quiet, force=args.force,
                        allow_external=args.allow_external_assets, stage_options=stage_options)
     for s in report["stages"]:

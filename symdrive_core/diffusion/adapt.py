@@ -45,7 +45,8 @@ class AdaptConfig:
 
 def shipped_weights(guided: bool) -> Path:
     """The weights an adaptation starts from: the guided restorer where it ships, else the default."""
-    return defaults.GUIDED_WEIGHTS if guided and defaults.GUIDED_WEIGHTS.exists() else defaults.DEFAULT_WEIGHTS
+    guided_weights = defaults.GUIDED_WEIGHTS
+    return guided_weights if guided and guided_weights.exists() else defaults.DEFAULT_WEIGHTS
 
 
 def drive_identity(manifest, reconstruction: str | Path) -> dict:
@@ -105,4 +106,5 @@ def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: Ad
                       threads=config.threads, degraded_fraction=config.degraded_fraction,
                       init=str(shipped_weights(guided)), guide=guided, max_seconds=left)
     record = train_restorer(out / PAIRS, out, cfg, resume=True, progress=progress)
-    return {**record, "pairs_seconds": round(time.perf_counter() - t0 - record["seconds"], 1), "reused": False}
+    pairs_seconds = round(time.perf_counter() - t0 - record["seconds"], 1)
+    return {**record, "pairs_seconds": pairs_seconds, "reused": False}

@@ -25,7 +25,6 @@ from .latent import PixelSpace
 from .unet import UNet, UNetConfig
 
 
-
 class BuiltinRestorer:
     """The shipped UNet in pixel space (no time shift). ``guided``: the restorer the
     geometry-guided methods sample with instead of this one (None: this one)."""

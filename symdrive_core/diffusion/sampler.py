@@ -51,14 +51,20 @@ def to_numpy(images: torch.Tensor) -> np.ndarray:
     return out[0] if out.shape[0] == 1 else out
 
 
-# Largest channel spread (max - min over R, G, B, any pixel) of an input that counts as grey: an
-# 8-bit grey image has none, and a reconstruction fitted to grey images renders within float error.
-GREY_SPREAD = 1.0 / 255
+# Largest channel spread (max - min over R, G, B, any pixel) of an input that counts as grey: half
+# an 8-bit level. A grey image has none, a reconstruction fitted to grey images renders within
+# float error of none, and any 8-bit colour differs by a whole level.
+GREY_SPREAD = 0.5 / 255
 
 
 def is_grey(*images: torch.Tensor | None) -> bool:
     """Whether every given image [B, 3, H, W] is grey (see ``GREY_SPREAD``)."""
     return all(float((x.amax(dim=1) - x.amin(dim=1)).max()) <= GREY_SPREAD for x in images if x is not None)
+
+
+def greyed(images: torch.Tensor) -> torch.Tensor:
+    """[B, 3, H, W] with each channel the mean of the three (the luminance the image carries)."""
+    return images.mean(dim=1, keepdim=True).expand_as(images).contiguous()
 
 
 def generator(seed: int) -> torch.Generator:
@@ -102,4 +108,4 @@ def restore_image(
                    z, ts, start=config.n_start)
     out = lat.decode(z)
     out = out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
-    return out.mean(dim=1, keepdim=True).expand_as(out).contiguous() if is_grey(left, right, init) else out
+    return greyed(out) if is_grey(left, right, init) else out

@@ -189,8 +189,8 @@ def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: b
         return StageDecision("adapt", False, "adaptation disabled")
     cam, train = truth_camera(manifest), split_frames(manifest)[0]
     if not train or not all(cam.frames[i].image for i in train):
-        return StageDecision("adapt", False, f"camera {cam.name!r} has no recorded image in every training frame "
-                             "to adapt the restorer on")
+        return StageDecision("adapt", False, f"camera {cam.name!r} lacks recorded images in its training "
+                             "frames to adapt the restorer on")
     if reconstructs:
         return StageDecision("adapt", True, "the reconstruction is fitted in this run: the restorer learns "
                              "its renders of this drive", train)

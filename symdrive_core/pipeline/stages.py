@@ -196,7 +196,8 @@ def adapt_stage(ctx) -> StageResult:
     record = adapt_restorer(m, background(ctx), drive_identity(m, background_path(ctx)), folder, opts.adapt,
                             guided=guided, progress=ctx.progress)
     ctx.shared.restorer = None  # restorer() loads the adapted weights
-    made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"], "train_seconds": record["seconds"]}
+    made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"],
+                                        "train_seconds": record["seconds"]}
     return StageResult({"reused": record["reused"], "guided": guided, "pairs": record["data"]["pairs"],
                         "steps": record["steps"], "final_loss": record["final_loss"],
                         "weights": folder.relative_to(ctx.tree.root).as_posix(), **made})
