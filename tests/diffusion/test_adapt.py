@@ -17,11 +17,11 @@ from symdrive_core.diffusion.sampler import SamplerConfig, restore_image, to_num
 from symdrive_core.diffusion.train import WEIGHTS, TrainConfig, train_restorer
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import write_splats
+from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
 from tests.diffusion.test_data_train import synthetic_pairs
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
-DEMO = defaults.DEFAULT_WEIGHTS.parents[2] / "data" / "demo_street"
 TINY = AdaptConfig(iters=3, offsets=(0.5,), cycle_offsets=(1.0,), cycle_iters=10)
 
 
@@ -65,7 +65,7 @@ def test_drive_identity_follows_content_not_names(drive, tmp_path):
 
 def test_shipped_weights_record_the_built_in_street():
     """The planner skips adaptation on the street the shipped weights were trained on."""
-    demo = load_manifest(DEMO)
+    demo = load_manifest(DEMO_PACKAGE)
     street = drive_identity(demo, demo.resolve(demo.background_splats))
     assert trained_drive(defaults.GUIDED_WEIGHTS) == trained_drive(defaults.DEFAULT_WEIGHTS) == street
 
@@ -80,7 +80,7 @@ def test_training_stops_at_its_time_budget(tmp_path):
 
 def _demo_views():
     """Frame 5 of the built-in street and its neighbours, cropped small."""
-    demo = load_manifest(DEMO)
+    demo = load_manifest(DEMO_PACKAGE)
     cam = demo.cameras[0]
     return [read_image(demo.resolve(cam.frames[i].image), channels=3)[40:72, 100:148] for i in (4, 5, 6)]
 
@@ -125,7 +125,7 @@ def test_a_grey_camera_restores_grey_views_from_renders_with_colour():
     from symdrive_core.diffusion.restore import LateralChain
     from symdrive_core.scene.camera import CameraView
 
-    demo = load_manifest(DEMO)
+    demo = load_manifest(DEMO_PACKAGE)
     cam = demo.cameras[0]
     colour = read_image(demo.resolve(cam.frames[6].image), channels=3)
     recorded = np.repeat(read_image(demo.resolve(cam.frames[5].image), channels=3).mean(-1, keepdims=True), 3, -1)

@@ -12,13 +12,12 @@ from symdrive_core.diffusion import defaults, models
 from symdrive_core.diffusion.adapt import AdaptConfig, drive_identity
 from symdrive_core.diffusion.train import WEIGHTS
 from symdrive_core.io.ply import write_splats
+from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.pipeline.plan import PlanOptions, make_plan
 from symdrive_core.pipeline.run import run_scene
 from symdrive_core.pipeline.stages import StageOptions
 from symdrive_core.scene import load_manifest
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
-
-DEMO = defaults.DEFAULT_WEIGHTS.parents[2] / "data" / "demo_street"
 
 
 @pytest.fixture
@@ -56,7 +55,7 @@ def test_the_plan_adapts_only_a_restorer_trained_on_another_drive(drive, make_pa
     assert not skip.run and "trained on this drive" in skip.reason
     monkeypatch.undo()
 
-    demo = make_plan(load_manifest(DEMO)).stage("adapt")  # the street the shipped weights learnt
+    demo = make_plan(load_manifest(DEMO_PACKAGE)).stage("adapt")  # the street the shipped weights learnt
     assert not demo.run and "trained on this drive" in demo.reason
     no_images = make_plan(load_manifest(make_package(lateral=(1.0,)))).stage("adapt")
     assert not no_images.run and "recorded image" in no_images.reason
