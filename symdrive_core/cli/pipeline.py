@@ -7,6 +7,19 @@ from ..diffusion.adapt import AdaptConfig
 from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_json_option, add_quiet_option, positive_int
 
+def _seconds(text: str) -> float:
+    import argparse
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
 
 
@@ -30,7 +43,7 @@ def add_commands(sub) -> None:
                    help="restore with the shipped restorer even on a drive its weights were not trained on")
     p.add_argument("--adapt-iters", type=positive_int,
                    help=f"training iterations of the restorer's adaptation (default {AdaptConfig.iters})")
-    p.add_argument("--adapt-seconds", type=float, metavar="S",
+    p.add_argument("--adapt-seconds", type=_seconds, metavar="S",
                    help="time budget of the adaptation, its pairs included "
                         f"(default {AdaptConfig.max_seconds:g})")
     add_quiet_option(p)

@@ -86,3 +86,18 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
     row = next(s for s in again["stages"] if s["name"] == "adapt")
     assert row["ran"] and row["reused"] and weights.stat().st_mtime_ns == made
     assert (out / "restore" / "front" / "+0.5" / "000000.png").exists()
+
+
+def test_the_command_line_turns_adaptation_off_and_checks_its_budget(drive, capsys):
+    from symdrive_core.cli import main
+
+    assert main(["plan", str(drive), "--json"]) == 0
+    assert next(s for s in json.loads(capsys.readouterr().out)["stages"] if s["name"] == "adapt")["run"]
+    assert main(["plan", str(drive), "--no-adapt", "--json"]) == 0
+    row = next(s for s in json.loads(capsys.readouterr().out)["stages"] if s["name"] == "adapt")
+    assert not row["run"] and row["reason"] == "adaptation disabled"
+    for bad in (["--adapt-seconds", "-1"], ["--adapt-seconds", "nan"], ["--adapt-iters", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["run", str(drive), *bad])
+        last = capsys.readouterr().err.strip().splitlines()[-1]
+        assert exc.value.code == 2 and last.startswith("symdrive run: error:") and bad[0] in last
