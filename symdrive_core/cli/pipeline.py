@@ -3,14 +3,15 @@
 
 from __future__ import annotations
 
+import argparse
+import math
+
 from ..diffusion.adapt import AdaptConfig
 from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_json_option, add_quiet_option, positive_int
 
-def _seconds(text: str) -> float:
-    import argparse
-    import math
 
+def _seconds(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
