@@ -90,6 +90,7 @@ class Shared:
     background: object = None  # Gaussians
     background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
     restorer: object = None
+    drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
     adapted: Path | None = None  # the folder of this drive's adapted restorer
     restored: list = field(default_factory=list)  # RestoredView, for refinement
 
@@ -126,6 +127,15 @@ def restorer(ctx):
     return ctx.shared.restorer
 
 
+def drive(ctx) -> dict:
+    """The drive's identity (its recorded frames and reconstruction), hashed once per run."""
+    from ..diffusion.adapt import drive_identity
+
+    if ctx.shared.drive is None:
+        ctx.shared.drive = drive_identity(ctx.manifest, background_path(ctx))
+    return ctx.shared.drive
+
+
 def adapted_folder(ctx) -> Path:
     """Where this drive's adapted restorer lives: under a key of the drive, the adaptation's
     options and the code (shipped weights included), not under the run's key, so runs that only
@@ -134,14 +144,13 @@ def adapted_folder(ctx) -> Path:
     import json
     from dataclasses import asdict
 
-    from ..diffusion.adapt import drive_identity
     from .cache_key import code_version
     from .outputs import ADAPT_CACHE
 
     if ctx.shared.adapted is None:
         o = ctx.options
-        payload = {"drive": drive_identity(ctx.manifest, background_path(ctx)), "adapt": asdict(o.adapt),
-                   "guided": o.geometry_guided, "code": code_version()}
+        payload = {"drive": drive(ctx), "adapt": asdict(o.adapt), "guided": o.geometry_guided,
+                   "code": code_version()}
         key = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
         ctx.shared.adapted = ctx.tree.folder(ADAPT_CACHE, key)
     return ctx.shared.adapted
@@ -181,7 +190,7 @@ def render_stage(ctx) -> StageResult:
 def adapt_stage(ctx) -> StageResult:
     """Fine-tune the shipped restorer on this drive's own pairs (the plan found its weights trained
     on another); the geometry-guided restorer where the package gives the warp, else the default."""
-    from ..diffusion.adapt import adapt_restorer, drive_identity
+    from ..diffusion.adapt import adapt_restorer
     from ..diffusion.warp import WarpError, package_warper
     from ..scene.ground_truth import truth_camera
 
@@ -193,8 +202,8 @@ def adapt_stage(ctx) -> StageResult:
         except WarpError:
             guided = False
     folder = adapted_folder(ctx)
-    record = adapt_restorer(m, background(ctx), drive_identity(m, background_path(ctx)), folder, opts.adapt,
-                            guided=guided, progress=ctx.progress)
+    record = adapt_restorer(m, background(ctx), drive(ctx), folder, opts.adapt, guided=guided,
+                            progress=ctx.progress)
     ctx.shared.restorer = None  # restorer() loads the adapted weights
     made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"],
                                         "train_seconds": record["seconds"]}
