@@ -3,7 +3,7 @@
 Modules: ``flow`` (schedule, Euler sampler, N_start initialisation), ``latent`` (pixel space /
 Flux VAE), ``unet`` (the built-in network), ``models`` (backends and ``load_restorer``),
 ``flux`` (Flux.1-dev + LoRA), ``sampler`` (images in, image out), ``data`` (training pairs),
-``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS refinement
+``train``, ``adapt`` (the restorer fine-tuned on the drive it restores), ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS refinement
 on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers outside read
 without torch; the command line is ``cli/diffusion.py``).
 
