@@ -202,9 +202,9 @@ def add_commands(sub) -> None:
     p.set_defaults(func=_restore)
 
 
-def _load_scene(args):
+def _reconstruction(args):
+    """The package, and the reconstruction PLY the command renders (``--gaussians``, else the manifest's)."""
     from ..errors import InputError
-    from ..io.ply import read_splats
     from ..scene import load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
@@ -215,18 +215,32 @@ def _load_scene(args):
             "no reconstruction: pass --gaussians or run `symdrive reconstruct`",
             "background.splats",
         )
+    return manifest, ply
+
+
+def _load_scene(args):
+    from ..io.ply import read_splats
+
+    manifest, ply = _reconstruction(args)
     return manifest, read_splats(ply, drop_invalid=True)
 
 
 def _make_pairs(args) -> int:
+    from ..diffusion.adapt import drive_identity
     from ..diffusion.cycle import cycle_config
     from ..diffusion.data import make_pairs
+    from ..errors import InputError
+    from ..io.ply import read_splats
 
-    manifest, gaussians = _load_scene(args)
+    if args.warps and not args.cycle:
+        raise InputError("make-pairs", "needs --cycle: the cycle reconstructions' degraded starts fill what "
+                         "no frame's warp sees", "--warps")
+    manifest, ply = _reconstruction(args)
     cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
     out = make_pairs(
-        manifest, gaussians, args.offsets, args.out, frames=args.frames, cycle_offsets=args.cycle, cycle_config=cycle,
-        warps=args.warps, progress=not args.quiet,
+        manifest, read_splats(ply, drop_invalid=True), args.offsets, args.out, frames=args.frames,
+        cycle_offsets=args.cycle, cycle_config=cycle, warps=args.warps, drive=drive_identity(manifest, ply),
+        progress=not args.quiet,
     )
     print(f"wrote {out}")
     return 0

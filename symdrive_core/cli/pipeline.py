@@ -3,8 +3,23 @@
 
 from __future__ import annotations
 
+import argparse
+import math
+
+from ..diffusion.adapt import AdaptConfig
 from ..pipeline.stages import StageOptions
 from . import add_frames_option, add_json_option, add_offsets_option, add_quiet_option, positive_int
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
 
 FORCE_HELP = "run in a folder that holds files no symdrive run wrote (they are left alone, never deleted)"
 
@@ -15,6 +30,7 @@ def add_commands(sub) -> None:
     p = sub.add_parser("plan", help="print the stages a scene package needs, and why, without running them")
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
+    p.add_argument("--no-adapt", action="store_true", help="plan without adapting the restorer to the drive")
     add_json_option(p, "the plan")
     add_external_assets_option(p)
     p.set_defaults(func=_plan)
@@ -27,6 +43,13 @@ def add_commands(sub) -> None:
     add_frames_option(p, help="the frame window: render, restore and harmonize only these recorded frames "
                               "(default: all; reconstruction fits every frame)")
     add_offsets_option(p, help="lateral views to restore instead of the manifest's effects.lateral_offsets")
+    p.add_argument("--no-adapt", action="store_true",
+                   help="restore with the shipped restorer even on a drive its weights were not trained on")
+    p.add_argument("--adapt-iters", type=positive_int,
+                   help=f"training iterations of the restorer's adaptation (default {AdaptConfig.iters})")
+    p.add_argument("--adapt-seconds", type=_seconds, metavar="S",
+                   help="time budget of the adaptation, its pairs included "
+                        f"(default {AdaptConfig.max_seconds:g})")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
@@ -73,7 +96,7 @@ def _plan(args) -> int:
     from . import write_json
 
     plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
-                     PlanOptions(refine=not args.no_refine))
+                     PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt))
     if args.json:
         write_json(plan.to_json(), args.json)
     else:
@@ -82,13 +105,17 @@ def _plan(args) -> int:
 
 
 def _run(args) -> int:
+    from dataclasses import replace
+
     from ..conventions import both_sides
     from ..pipeline.plan import PlanOptions
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
 
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
-    options = PlanOptions(refine=not args.no_refine, frames=args.frames,
+    budget = {"iters": args.adapt_iters, "max_seconds": args.adapt_seconds}
+    stage_options.adapt = replace(stage_options.adapt, **{k: v for k, v in budget.items() if v is not None})
+    options = PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt, frames=args.frames,
                           offsets=None if args.offsets is None else tuple(both_sides(args.offsets)))
     report = run_scene(args.package, args.out, options=options,
                        device=args.device, progress=not args.quiet, force=args.force,

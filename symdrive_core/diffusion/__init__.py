@@ -6,7 +6,8 @@ Flux VAE), ``unet`` (the built-in network), ``models`` (backends and ``load_rest
 ``flux_train`` (its LoRA training), ``sampler`` (images in, image out), ``tiling`` (overlapping
 tiles under a memory budget), ``data`` (training pairs), ``cycle`` (degraded starts from cycle
 reconstructions), ``warp`` (recorded neighbours warped over the ground: the guided chain's
-geometry), ``train``, ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS
+geometry), ``train``, ``adapt`` (the restorer fine-tuned on the drive it restores),
+``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS
 refinement on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers
 outside read without torch; the command line is ``cli/diffusion.py``).
 

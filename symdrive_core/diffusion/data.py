@@ -54,12 +54,14 @@ def make_pairs(
     cycle_offsets=(),
     cycle_config=None,
     warps: bool = False,
+    drive: dict | None = None,
     progress: bool = True,
 ) -> Path:
     """Write ``(I_-d, I_d) -> I_0`` for every recorded frame (default: the training frames) and d,
     and the degraded starts of one cycle reconstruction per ``cycle_offsets`` entry (fitted with
     ``cycle_config``, a :class:`~symdrive_core.optim.reconstruct.ReconstructConfig`; default
-    :func:`.cycle.cycle_config`); ``warps``: each frame's warp from the other frames (see above)."""
+    :func:`.cycle.cycle_config`); ``warps``: each frame's warp from the other frames (see above).
+    ``drive`` (:func:`.adapt.drive_identity`) is recorded, and passed on to weights trained on them."""
     from safetensors.numpy import save_file
     from tqdm import tqdm
 
@@ -124,6 +126,8 @@ def make_pairs(
     }
     if cycle_offsets:
         meta["cycle_iters"] = str(cfg.iters)
+    if drive is not None:
+        meta["drive"] = json.dumps(drive)
     out = Path(out)
     with atomic_path(out) as tmp:
         save_file(tensors, str(tmp), metadata=meta)

@@ -20,13 +20,9 @@ import torch
 
 from ..errors import InputError
 from ..io.atomic import atomic_path
+from .defaults import DEFAULT_WEIGHTS, GUIDED_WEIGHTS
 from .latent import PixelSpace
 from .unet import UNet, UNetConfig
-
-DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "restorer.safetensors"
-# trained with the geometry-guided warp and its mask as conditions (scripts/train_restorer_geo.sh);
-# where it ships, the geometry-guided methods sample with it and everything else with the default
-GUIDED_WEIGHTS = DEFAULT_WEIGHTS.with_name("restorer_geo.safetensors")
 
 
 class BuiltinRestorer:

@@ -36,7 +36,7 @@ from ..scene import Manifest
 from ..scene.camera import CameraView, SeenBy
 from ..scene.ground_truth import truth_camera
 from ..splat.render import SplatRenderer
-from .sampler import DEFAULT, SamplerConfig, restore_image, to_numpy, to_tensor
+from .sampler import DEFAULT, SamplerConfig, greyed, is_grey, restore_image, to_numpy, to_tensor
 from .warp import Warp
 
 WARP = "warp"
@@ -87,6 +87,9 @@ class LateralChain:
         chain starts from) are needed only by the geometry-guided methods."""
         self.restorer, self.render, self.camera, self.sampler = restorer, render, camera, sampler
         self.recorded = recorded
+        # a grey camera: every view of it is grey, whatever colour the reconstruction's renders
+        # (fitted from coloured initial points, say) picked up
+        self.grey = is_grey(to_tensor(recorded))
         self.warper, self.frame = warper, frame
         self._renders: dict[float, np.ndarray] = {}
         self._warps: dict[float, Warp] = {}
@@ -154,8 +157,11 @@ class LateralChain:
 
     def _sample(self, left: np.ndarray, right: np.ndarray, init: np.ndarray, offset: float, guided: bool) -> np.ndarray:
         self.samples += 1
-        return to_numpy(restore_image(self._restorer(guided), to_tensor(left), to_tensor(right), to_tensor(init),
-                                      self.sampler, self._guide(offset, guided)))
+        images, guide = [to_tensor(x) for x in (left, right, init)], self._guide(offset, guided)
+        if self.grey:
+            images = [greyed(x) for x in images]
+            guide = None if guide is None else torch.cat([greyed(guide[:, :3]), guide[:, 3:]], dim=1)
+        return to_numpy(restore_image(self._restorer(guided), *images, self.sampler, guide))
 
     def restore(self, offset: float, step: float, guided: bool = False) -> np.ndarray:
         """The restored view at ``offset`` metres (positive = right) with chain step ``step``;

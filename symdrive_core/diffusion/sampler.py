@@ -51,6 +51,22 @@ def to_numpy(images: torch.Tensor) -> np.ndarray:
     return out[0] if out.shape[0] == 1 else out
 
 
+# Largest channel spread (max - min over R, G, B, any pixel) of an input that counts as grey: half
+# an 8-bit level. A grey image has none, a reconstruction fitted to grey images renders within
+# float error of none, and any 8-bit colour differs by a whole level.
+GREY_SPREAD = 0.5 / 255
+
+
+def is_grey(*images: torch.Tensor | None) -> bool:
+    """Whether every given image [B, 3, H, W] is grey (see ``GREY_SPREAD``)."""
+    return all(float((x.amax(dim=1) - x.amin(dim=1)).max()) <= GREY_SPREAD for x in images if x is not None)
+
+
+def greyed(images: torch.Tensor) -> torch.Tensor:
+    """[B, 3, H, W] with each channel the mean of the three (the luminance the image carries)."""
+    return images.mean(dim=1, keepdim=True).expand_as(images).contiguous()
+
+
 def generator(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(int(seed))
 
@@ -65,7 +81,11 @@ def restore_image(
     guide: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """The centre view between ``left`` and ``right``; ``init`` seeds the start at ``n_start``;
-    ``guide`` [B, 4, H, W] (warp and mask at the target camera) reaches restorers that take one."""
+    ``guide`` [B, 4, H, W] (warp and mask at the target camera) reaches restorers that take one.
+
+    From grey inputs the result is grey, their channel mean: nothing in them says what colour the
+    view has, yet a restorer trained on colour streets paints a cast of about 1/255 and colour
+    grain from the per-channel noise into them."""
     if config.n_start > 0 and init is None:
         raise ValueError("n_start > 0 needs an initialisation image")
     lat = restorer.latent
@@ -87,4 +107,5 @@ def restore_image(
     z = flow.euler(lambda zt, t: velocity(zt, t, zl, zr, zg) if zg is not None else velocity(zt, t, zl, zr),
                    z, ts, start=config.n_start)
     out = lat.decode(z)
-    return out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
+    out = out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
+    return greyed(out) if is_grey(left, right, init) else out

@@ -66,6 +66,9 @@ class TrainConfig:
     start_t_min: float = 0.1  # their lowest noise level (see flow.flow_loss)
     init: str | None = None  # restorer weights to start from (default: a fresh network)
     guide: bool = False  # the warp and its mask as a condition (pairs with warps)
+    # stop after this many seconds of training even if fewer than ``steps`` ran (None: no limit);
+    # the learning-rate schedule still spans ``steps``, and the EMA so far is what ships
+    max_seconds: float | None = None
 
     def unet(self) -> UNetConfig:
         return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output,
@@ -172,6 +175,7 @@ def train_restorer(
     if resume and ckpt.exists():
         start, losses = load_checkpoint(ckpt, net, ema, opt)
     model = BuiltinRestorer(net).train()
+    done = start
     t0 = time.perf_counter()
     bar = tqdm(
         range(start, cfg.steps),
@@ -206,8 +210,12 @@ def train_restorer(
         losses.append(round(loss.item(), 6))
         if (step + 1) % 10 == 0:
             bar.set_postfix(loss=f"{sum(losses[-100:]) / len(losses[-100:]):.4f}")
-        if (step + 1) % cfg.checkpoint_every == 0 or step + 1 == cfg.steps:
-            save_checkpoint(ckpt, net, ema, opt, step + 1, losses, cfg)
+        done = step + 1
+        out_of_time = cfg.max_seconds is not None and time.perf_counter() - t0 >= cfg.max_seconds
+        if done % cfg.checkpoint_every == 0 or done == cfg.steps or out_of_time:
+            save_checkpoint(ckpt, net, ema, opt, done, losses, cfg)
+        if out_of_time:
+            break
     bar.close()
     tail = losses[-100:]
     record = {
@@ -217,9 +225,10 @@ def train_restorer(
             "file": Path(pairs).name,
             "sha256": file_sha256(pairs),
             "pairs": len(data),
-            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets", "cycle_offsets") if k in data.metadata},
+            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets", "cycle_offsets", "drive")
+               if k in data.metadata},
         },
-        "steps": cfg.steps,
+        "steps": done,
         "resumed_from": start,
         "final_loss": round(sum(tail) / max(len(tail), 1), 6),
         "seconds": round(time.perf_counter() - t0, 1),

@@ -21,6 +21,10 @@ LOCK = ".symdrive.lock"
 STATE = "state.json"
 REPORT = "report.json"
 ASSET_CACHE = "asset_cache"  # mesh-only actors' sampled splats, shared by the stages that render them
+# adapted restorers, each in a folder named by its own key (pipeline.stages.adapted_folder): they
+# outlive a change of the run's key, which mostly changes how views are restored, not the drive
+ADAPT_CACHE = "adapt"
+KEYED_CACHES = frozenset({ADAPT_CACHE})
 BOOKKEEPING = frozenset({JOURNAL, LOCK, STATE, REPORT})
 # Temporaries of io.atomic: ".<stem>.<random>.part<ext>" (files), ".<name>.<random>.part" and
 # ".<name>.old-<pid>" (folders); the random part is tempfile's.
@@ -115,10 +119,12 @@ class OutputTree:
 
     def remove_written(self) -> int:
         """Delete everything runs here wrote (claimed files and folders and their temporaries),
-        and nothing else; returns how many entries went."""
+        and nothing else, except the keyed caches; returns how many entries went."""
         removed = 0
-        folders = {(self.root / c.rstrip("/")).parent for c in self.claimed()}
-        for rel in sorted(self.claimed(), key=len, reverse=True):
+        kept = {c for c in self.claimed() if PurePosixPath(c).parts[0] in KEYED_CACHES}
+        gone = self.claimed() - kept
+        folders = {(self.root / c.rstrip("/")).parent for c in gone}
+        for rel in sorted(gone, key=len, reverse=True):
             p = self.root / rel.rstrip("/")
             if not _inside(self.real_root, p):  # a journal line edited (or shipped) to point elsewhere
                 continue
@@ -131,6 +137,8 @@ class OutputTree:
         removed += self.remove_temporaries()
         (self.root / JOURNAL).unlink(missing_ok=True)
         self._claimed = set()
+        for rel in sorted(kept):
+            self._claim(rel)
         for d in sorted(folders, key=lambda p: len(p.parts), reverse=True):
             while d != self.root and d.is_relative_to(self.root):
                 try:

@@ -6,6 +6,7 @@ never loads a diffusion model for a scene that needs none.
 
 * no inserted actor (or harmonization off)   -> no harmonize / finetune, no diffusion model
 * no lateral offsets                          -> no restore / refine
+* restorer weights trained on another drive   -> adapt them to this one (its recorded frames)
 * actor outside every frustum in a frame      -> not rendered, not harmonized in that frame
 * no sun                                      -> no shadow region in the harmonization mask
 * every asset SH degree 0                     -> no SH evaluation (colour is the DC term)
@@ -46,6 +47,7 @@ class StageDecision:
 class PlanOptions:
     refine: bool = True
     evaluate: bool = True
+    adapt: bool = True  # fine-tune the restorer on a drive its weights were not trained on
     near: float = NEAR_PLANE
     # The frame window: render, restore and harmonize only these recorded frames (None: every
     # frame). Reconstruction still fits every recorded frame; scoring keeps to the window.
@@ -163,12 +165,12 @@ def _has_ground_truth(manifest: Manifest) -> bool:
     return any(cf.image for cam in manifest.cameras for cf in cam.frames)
 
 
-def _has_training_images(manifest: Manifest) -> bool:
-    """Refinement keeps the recorded training frames of the first camera in its loss
-    (``optim.reconstruct.load_views``): each needs its image."""
+def _has_training_images(manifest: Manifest, cam) -> bool:
+    """Whether every recorded training frame of ``cam`` has its image: refinement keeps the first
+    camera's in its loss (``optim.reconstruct.load_views``), adaptation pairs the truth camera's."""
     from ..scene.ground_truth import split_frames
 
-    train, cam = split_frames(manifest)[0], manifest.cameras[0]
+    train = split_frames(manifest)[0]
     return bool(train) and all(cam.frames[i].image for i in train)
 
 
@@ -204,6 +206,33 @@ def _window(manifest: Manifest, frames: list[int] | None) -> list[int] | None:
     return sorted({int(f) for f in frames})
 
 
+def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: bool) -> StageDecision:
+    """Fine-tune the restorer on this drive's own pairs when its weights record another drive."""
+    from ..diffusion.adapt import drive_identity, shipped_weights, trained_drive
+    from ..scene.ground_truth import split_frames, truth_camera
+
+    if not restores:
+        return StageDecision("adapt", False, "no lateral views to restore")
+    if not opt.adapt:
+        return StageDecision("adapt", False, "adaptation disabled")
+    cam, train = truth_camera(manifest), split_frames(manifest)[0]
+    if not _has_training_images(manifest, cam):
+        return StageDecision("adapt", False, f"camera {cam.name!r} lacks recorded images in its training "
+                             "frames to adapt the restorer on")
+    if reconstructs:
+        return StageDecision("adapt", True, "the reconstruction is fitted in this run: the restorer learns "
+                             "its renders of this drive", train)
+    if not manifest.background_splats:
+        return StageDecision("adapt", False, "no reconstruction to render training pairs from")
+    drive = drive_identity(manifest, manifest.resolve(manifest.background_splats))
+    seen = trained_drive(shipped_weights(guided=True))
+    if seen is not None and seen.get("identity") == drive["identity"]:
+        return StageDecision("adapt", False, f"the restorer was trained on this drive ({drive['identity']})")
+    trained_on = f"{seen.get('scene')!r} ({seen.get('identity')})" if seen else "an unrecorded drive"
+    return StageDecision("adapt", True, f"the restorer was trained on {trained_on}, not on this drive "
+                         f"({drive['identity']})", train)
+
+
 def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None,
               key: str | None = None) -> Plan:
     """Decide every stage for this scene. ``previous`` is the last run's state and ``key`` this
@@ -232,6 +261,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     stages.append(_cast_shadow(manifest, shown))
 
     offsets = [float(o) for o in (eff.lateral_offsets if opt.offsets is None else opt.offsets)]
+    stages.append(_adapt(manifest, opt, bool(offsets), stages[0].run))
     if offsets:
         offs = ", ".join(f"{o:g}" for o in offsets)
         source = "requested" if opt.offsets is None else "requested on the command line"
@@ -239,7 +269,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
                                     offsets=offsets))
         if not opt.refine:
             stages.append(StageDecision("refine", False, "refinement disabled"))
-        elif not _has_training_images(manifest):
+        elif not _has_training_images(manifest, manifest.cameras[0]):
             stages.append(StageDecision("refine", False, "no recorded images to refine against"))
         else:
             stages.append(StageDecision("refine", True, "refine the reconstruction on restored views"))

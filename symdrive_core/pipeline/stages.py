@@ -1,5 +1,5 @@
-"""The stages ``symdrive run`` executes: reconstruct, render, restore, refine, harmonize, finetune,
-evaluate. Each is a thin call into the library that returns what it did and what it measured
+"""The stages ``symdrive run`` executes: reconstruct, render, adapt, restore, refine, harmonize,
+finetune, evaluate. Each is a thin call into the library that returns what it did and what it measured
 (:class:`StageResult`); heavy modules are imported inside, so a plan that skips a stage never
 loads its code (no diffusion model for a scene that needs none).
 
@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..diffusion.adapt import AdaptConfig
 from ..diffusion.defaults import SAMPLER_DEFAULTS
 from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
 from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
@@ -48,6 +49,7 @@ class StageOptions:
     # GiB one restorer evaluation may use; beyond it samples, then overlapping tiles, run in turn
     # (diffusion.tiling). Fixed, not read from the machine, so the run's cache key stays put.
     max_memory_gib: float | None = 4.0
+    adapt: AdaptConfig = field(default_factory=AdaptConfig)  # the restorer's fine-tune on this drive
 
 
 @dataclass
@@ -86,6 +88,8 @@ class Shared:
     background: object = None  # Gaussians
     background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
     restorer: object = None
+    drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
+    adapted: Path | None = None  # the folder of this drive's adapted restorer
     restored: list = field(default_factory=list)  # RestoredView, for refinement
 
 
@@ -105,11 +109,49 @@ def background(ctx):
 
 
 def restorer(ctx):
-    from ..diffusion.models import load_restorer
+    """The shipped restorer; where the plan adapts it, the adapted weights take the place of the
+    weights they were fine-tuned from (the guided ones, or the default)."""
+    from ..diffusion.models import load_builtin, load_restorer
+    from ..diffusion.train import WEIGHTS
 
     if ctx.shared.restorer is None:
         ctx.shared.restorer = load_restorer()
+        if ctx.plan.runs("adapt"):
+            adapted = load_builtin(adapted_folder(ctx) / WEIGHTS)
+            if adapted.guide_channels:
+                ctx.shared.restorer.guided = adapted
+            else:
+                ctx.shared.restorer = adapted
     return ctx.shared.restorer
+
+
+def drive(ctx) -> dict:
+    """The drive's identity (its recorded frames and reconstruction), hashed once per run."""
+    from ..diffusion.adapt import drive_identity
+
+    if ctx.shared.drive is None:
+        ctx.shared.drive = drive_identity(ctx.manifest, background_path(ctx))
+    return ctx.shared.drive
+
+
+def adapted_folder(ctx) -> Path:
+    """Where this drive's adapted restorer lives: under a key of the drive, the adaptation's
+    options and the code (shipped weights included), not under the run's key, so runs that only
+    restore differently reuse it."""
+    import hashlib
+    import json
+    from dataclasses import asdict
+
+    from .cache_key import code_version
+    from .outputs import ADAPT_CACHE
+
+    if ctx.shared.adapted is None:
+        o = ctx.options
+        payload = {"drive": drive(ctx), "adapt": asdict(o.adapt), "guided": o.geometry_guided,
+                   "code": code_version()}
+        key = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+        ctx.shared.adapted = ctx.tree.folder(ADAPT_CACHE, key)
+    return ctx.shared.adapted
 
 
 def _sampler(opts: StageOptions):
@@ -140,6 +182,32 @@ def render_stage(ctx) -> StageResult:
     fitted = background(ctx) if ctx.shared.background_path is not None else None
     done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted)
     return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
+
+
+@stage("adapt")
+def adapt_stage(ctx) -> StageResult:
+    """Fine-tune the shipped restorer on this drive's own pairs (the plan found its weights trained
+    on another); the geometry-guided restorer where the package gives the warp, else the default."""
+    from ..diffusion.adapt import adapt_restorer
+    from ..diffusion.warp import WarpError, package_warper
+    from ..scene.ground_truth import truth_camera
+
+    m, opts = ctx.manifest, ctx.options
+    guided = opts.geometry_guided
+    if guided:
+        try:
+            package_warper(m, truth_camera(m), background(ctx))
+        except WarpError:
+            guided = False
+    folder = adapted_folder(ctx)
+    record = adapt_restorer(m, background(ctx), drive(ctx), folder, opts.adapt, guided=guided,
+                            progress=ctx.progress)
+    ctx.shared.restorer = None  # restorer() loads the adapted weights
+    made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"],
+                                        "train_seconds": record["seconds"]}
+    return StageResult({"reused": record["reused"], "guided": guided, "pairs": record["data"]["pairs"],
+                        "steps": record["steps"], "final_loss": record["final_loss"],
+                        "weights": folder.relative_to(ctx.tree.root).as_posix(), **made})
 
 
 @stage("restore")

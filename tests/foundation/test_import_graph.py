@@ -27,8 +27,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
-
 import symdrive_core
 
 ROOT = Path(symdrive_core.__file__).parent

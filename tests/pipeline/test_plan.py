@@ -19,7 +19,7 @@ def test_full_scene_runs_every_effect(make_package):
     m = load_manifest(make_package(lateral=(1.0, 2.0), sun=[1, 0, -1], harmonize=True))
     m.effects.finetune = True
     plan = make_plan(m)
-    assert _stages(plan) == {"reconstruct": False, "render": True, "restore": True, "refine": True,
+    assert _stages(plan) == {"reconstruct": False, "render": True, "adapt": False, "restore": True, "refine": True,
                              "harmonize": True, "cast_shadow": True, "finetune": True,
                              "sh_eval": True, "evaluate": False}
     assert plan.needs_diffusion
@@ -110,11 +110,12 @@ def test_frustum_test_explicit():
 
 
 def test_plan_command_never_imports_torch_or_diffusion(make_package):
+    """Only the torch-free diffusion modules: the defaults, and the adaptation's config and drive identity."""
     path = make_package(actors=())
     code = ("import sys\nfrom symdrive_core.cli import main\n"
             f"rc = main(['plan', {str(path)!r}])\n"
             "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'diffusers')"
-            " or m.startswith('symdrive_core.diffusion.') and m != 'symdrive_core.diffusion.defaults']\n"
+            " or m.startswith('symdrive_core.diffusion.') and m.split('.')[2] not in ('defaults', 'adapt')]\n"
             "print('LOADED', bad)\nsys.exit(rc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -126,7 +127,7 @@ def test_plan_command_json(make_package, capsys):
     assert main(["plan", str(make_package(lateral=(0.5,))), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["needs_diffusion"] is True
-    assert [s["name"] for s in data["stages"]][:4] == ["reconstruct", "render", "cast_shadow", "restore"]
+    assert [s["name"] for s in data["stages"]][:5] == ["reconstruct", "render", "cast_shadow", "adapt", "restore"]
 
 
 def test_sh_degree_of_a_compressed_ply_comes_from_its_sh_element(tmp_path):

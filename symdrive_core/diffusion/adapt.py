@@ -1,0 +1,110 @@
+"""The restorer adapts to the drive it restores.
+
+The shipped weights were trained on one synthetic street; on a drive they have not seen they
+barely change the raw render. The paper's remedy is to train on the drive's own pairs: renders of
+its reconstruction symmetric around each recorded training frame, the recorded image the target,
+with the degraded starts and warps the shipped guided restorer learnt from
+(:func:`.data.make_pairs`). Here that is a short fine-tune from the shipped weights
+(:func:`.train.train_restorer`) within the budget of an :class:`AdaptConfig`.
+
+Weights record the drive they were trained on (:func:`drive_identity`, the content of its recorded
+frames and of its reconstruction; ``make-pairs`` writes it, training passes it on), so the planner
+adapts only when the weights were trained on another drive. The held-out frames never take part.
+
+Nothing here imports torch at module level: the planner and ``StageOptions`` read this module.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from . import defaults
+
+PAIRS = "pairs.safetensors"
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Budget and recipe of one adaptation (``StageOptions.adapt``). ``max_seconds`` bounds the
+    whole adaptation: training stops when making the pairs and the steps so far have used it."""
+
+    iters: int = 400
+    max_seconds: float | None = 600.0
+    offsets: tuple[float, ...] = (0.5, 1.0, 1.5)  # the pairs' symmetric distances d (metres)
+    cycle_offsets: tuple[float, ...] = (-1.5, 1.5)  # the cycle reconstructions of the degraded starts
+    cycle_iters: int = 300
+    lr: float = 1e-4  # a quarter of training from scratch: it starts from trained weights
+    warmup: int = 20
+    degraded_fraction: float = 0.75  # as the shipped guided restorer was trained
+    seed: int = 0
+    threads: int = 1
+
+
+def shipped_weights(guided: bool) -> Path:
+    """The weights an adaptation starts from: the guided restorer where it ships, else the default."""
+    guided_weights = defaults.GUIDED_WEIGHTS
+    return guided_weights if guided and guided_weights.exists() else defaults.DEFAULT_WEIGHTS
+
+
+def drive_identity(manifest, reconstruction: str | Path) -> dict:
+    """``{"scene", "identity"}``: the scene's name, and a hash of what training pairs are made from
+    (the ground-truth camera's frames: size, intrinsics, poses, recorded image and depth bytes;
+    and the reconstruction's bytes). File names play no part: a copied package is the same drive."""
+    from ..scene.ground_truth import truth_camera
+
+    cam = truth_camera(manifest)
+    geometry = [cam.width, cam.height, [[cf.K.tolist(), cf.camera_to_world.tolist()] for cf in cam.frames]]
+    h = hashlib.sha256(json.dumps(geometry).encode())
+    paths = [manifest.resolve(rel) if rel else None for cf in cam.frames for rel in (cf.image, cf.depth)]
+    for path in [*paths, Path(reconstruction)]:
+        if path is None or not path.is_file():
+            h.update(b"\0missing")
+            continue
+        with open(path, "rb") as f:
+            h.update(hashlib.file_digest(f, "sha256").digest())
+    return {"scene": manifest.name, "identity": h.hexdigest()[:16]}
+
+
+def trained_drive(weights: str | Path) -> dict | None:
+    """The drive ``weights`` were trained on, from their metadata (None: not recorded)."""
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(weights), "np") as f:
+            meta = json.loads((f.metadata() or {}).get("meta", "{}"))
+    except (OSError, SafetensorError, json.JSONDecodeError):
+        return None
+    drive = meta.get("data", {}).get("drive") if isinstance(meta, dict) else None
+    return drive if isinstance(drive, dict) else None
+
+
+def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: AdaptConfig = AdaptConfig(), *,
+                   guided: bool = True, progress: bool = True) -> dict:
+    """Fine-tune the shipped restorer (``guided``: the guided one, on pairs with warps) on this
+    drive's pairs, into ``out`` (pairs, weights, record, checkpoint). Weights already finished there
+    are reused, a checkpoint is resumed. Returns the training record plus ``reused``."""
+    import time
+
+    from ..scene.ground_truth import truth_camera
+    from .cycle import cycle_config
+    from .data import make_pairs
+    from .train import RECORD, WEIGHTS, TrainConfig, train_restorer
+
+    out = Path(out)
+    if (out / WEIGHTS).exists() and (out / RECORD).exists():
+        return {**json.loads((out / RECORD).read_text()), "reused": True}
+    t0 = time.perf_counter()
+    if not (out / PAIRS).exists():
+        make_pairs(manifest, gaussians, config.offsets, out / PAIRS, camera=truth_camera(manifest).name,
+                   cycle_offsets=config.cycle_offsets, cycle_config=cycle_config(config.cycle_iters),
+                   warps=guided, drive=drive, progress=progress)
+    left = None if config.max_seconds is None else max(config.max_seconds - (time.perf_counter() - t0), 0.0)
+    cfg = TrainConfig(steps=config.iters, lr=config.lr, warmup=config.warmup, seed=config.seed,
+                      threads=config.threads, degraded_fraction=config.degraded_fraction,
+                      init=str(shipped_weights(guided)), guide=guided, max_seconds=left)
+    record = train_restorer(out / PAIRS, out, cfg, resume=True, progress=progress)
+    pairs_seconds = round(time.perf_counter() - t0 - record["seconds"], 1)
+    return {**record, "pairs_seconds": pairs_seconds, "reused": False}
