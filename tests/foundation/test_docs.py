@@ -60,31 +60,48 @@ def _variants(line: str) -> list[list[str]]:
 def _command_lines():
     for doc in DOCS:
         for number, line in _fenced_lines(doc.read_text(encoding="utf-8")):
-            if line.startswith("symdrive ") or line == "symdrive":
+            if line.startswith("symdrive "):
                 yield pytest.param(line, id=f"{doc.relative_to(ROOT)}:{number}")
 
 
 COMMAND_LINES = list(_command_lines())
 
 
-def _parse(args: list[str]) -> tuple[int, str, argparse.Namespace | None]:
+def _parse(args: list[str]) -> tuple[int, str]:
+    """Exit status (0: parsed) and the parser's message."""
     err, out = io.StringIO(), io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         try:
-            return 0, "", build_parser().parse_args(args)
+            build_parser().parse_args(args)
+            return 0, ""
         except SystemExit as exc:
-            return int(exc.code or 0), err.getvalue().strip(), None
+            return int(exc.code or 0), err.getvalue().strip()
 
 
 def test_the_docs_show_commands():
     assert len(COMMAND_LINES) >= 30
 
 
+def _command_parser(args: list[str]) -> argparse.ArgumentParser:
+    """The parser of the (sub)command ``args`` name."""
+    parser = build_parser()
+    for token in args:
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not subs or token not in subs[0].choices:
+            break
+        parser = subs[0].choices[token]
+    return parser
+
+
 @pytest.mark.parametrize("line", COMMAND_LINES)
 def test_each_command_line_in_the_docs_parses(line):
     for args in _variants(line):
-        status, message, _ = _parse(args)
+        status, message = _parse(args)
         assert status == 0, f"{' '.join(args)}: {message}"
+        # spelled out, not a prefix argparse happens to accept
+        known = _command_parser(args)._option_string_actions
+        abbreviated = [t for t in args if t.startswith("--") and t.split("=")[0] not in known]
+        assert not abbreviated, f"{' '.join(args)}: not the option's full name: {abbreviated}"
 
 
 def _leaf_commands(parser: argparse.ArgumentParser, prefix: tuple[str, ...] = ()):
