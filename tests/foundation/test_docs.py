@@ -1,5 +1,6 @@
 """The docs stay runnable: every ``symdrive`` line in a fenced code block of the READMEs and docs/*.md
-parses with the real command line, every command appears in one, and every relative link resolves."""
+parses with the real command line, every command appears in one, every relative link resolves and
+every repository path they name exists."""
 
 from __future__ import annotations
 
@@ -145,3 +146,11 @@ def test_the_docs_link_each_other():
 @pytest.mark.parametrize("doc, target", RELATIVE_LINKS)
 def test_each_relative_link_resolves(doc, target):
     assert (doc.parent / target).exists(), f"{doc.relative_to(ROOT)} links to {target}, which does not exist"
+
+
+def test_each_repository_path_the_docs_name_exists():
+    named = {path.rstrip(".,:") for doc in DOCS
+             for path in re.findall(r"`((?:symdrive_core|scripts|tests|blender_addon|docs)/[^`\s:]*)", doc.read_text())}
+    assert len(named) >= 20
+    missing = sorted(path for path in named if not (ROOT / path).exists())
+    assert not missing, f"the docs name files that do not exist: {missing}"
