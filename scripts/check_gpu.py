@@ -154,7 +154,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.backend == "gsplat":
         if not torch.cuda.is_available():
-            print("check_gpu: no CUDA device here: nothing checked (the README says where this ran)")
+            print("check_gpu: no CUDA device here: nothing checked (docs/renderer.md says where this ran)")
             return 3
         try:
             import gsplat  # noqa: F401

@@ -29,7 +29,7 @@ class StageOptions:
     ar_step: float = 0.5  # auto-regressive step d in metres (the paper's 0.5)
     # Guide the chain by the recorded neighbours warped over the ground (diffusion.warp): its start
     # states and far conditions become those warps (method geo_ar_d<step>). It beats the unguided
-    # chain at every offset on the demo's held-out lateral views (README); a camera whose package
+    # chain at every offset on the demo's held-out lateral views (docs/results.md); a camera whose package
     # gives the warp no ground or no depth falls back to the unguided chain.
     geometry_guided: bool = True
     # The paper runs Flux 50 steps from step 10 (t = 0.8), one sample. The shipped small restorer
