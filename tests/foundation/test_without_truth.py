@@ -16,6 +16,7 @@ from symdrive_core.cli import main
 from symdrive_core.io.ply import write_splats
 from symdrive_core.io.points import write_points
 from tests.conftest import manifest_dict, random_gaussians, write_recorded_images
+from tests.traffic.scenes import CAR, write_pool
 
 
 @pytest.fixture
@@ -115,11 +116,15 @@ def test_restore_refine_without_evaluate_is_one_line(bare_package, tmp_path, cap
     assert not (tmp_path / "out").exists()
 
 
-def test_traffic_without_a_road_is_one_line(bare_package, tmp_path, capsys):
+def test_traffic_needs_a_road_given_on_the_command_line(bare_package, tmp_path, capsys):
     pkg = bare_package()
     assert main(["traffic", str(pkg), "--density", "1", "--seconds", "1", "--out", str(tmp_path / "t")]) == 2
     assert "--road" in refused(capsys, pkg, "ground_truth.road")
     assert not (tmp_path / "t").exists()
+    pool = write_pool(tmp_path / "pool", sizes=(CAR,))
+    assert main(["traffic", str(pkg), "--road", "straight:60", "--density", "20", "--seconds", "2",
+                 "--assets", str(pool), "--out", str(tmp_path / "t"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "t" / "manifest.json").read_text())["ground_truth"]["road"]
 
 
 def test_insert_renders_and_insert_eval_is_one_line(bare_package, tmp_path, capsys):
@@ -170,7 +175,8 @@ def test_bench_with_nothing_to_score_is_one_line(bare_package, tmp_path, capsys)
     assert not (tmp_path / "b").exists()
 
 
-@pytest.mark.parametrize("agent,extra", [("replay", ["--size", "16x12"]), ("idm", ["--no-render"])])
+@pytest.mark.parametrize("agent,extra", [("replay", ["--size", "16x12"]), ("idm", ["--no-render"]),
+                                         ("idm", ["--no-render", "--traffic", "sumo", "--vehicles", "2"])])
 def test_sim_drives_the_corridor(bare_package, tmp_path, agent, extra):
     pkg = bare_package()
     out = tmp_path / "sim"
