@@ -201,3 +201,14 @@ def test_import_lidar_adds_depth(bare_package, tmp_path):
     assert main(["import", "lidar", str(pkg), str(scans), "--sensor-to-camera", str(calib), "--quiet"]) == 0
     frames = json.loads((pkg / "manifest.json").read_text())["cameras"][0]["frames"]
     assert all((pkg / f["depth"]).exists() for f in frames)
+
+
+def test_restore_evaluate_on_frames_the_truth_leaves_out_is_one_line(bare_package, tmp_path, capsys):
+    """Lateral truth of frame 0 only: scoring frame 1 is refused as missing truth, naming the frame."""
+    pkg = bare_package()
+    d = json.loads((pkg / "manifest.json").read_text())
+    d["ground_truth"] = {"lateral": [{"offset_m": 1.0, "frames": {"0": d["cameras"][0]["frames"][0]["image"]}}]}
+    (pkg / "manifest.json").write_text(json.dumps(d))
+    assert main(["restore", str(pkg), "--out", str(tmp_path / "out"), *RESTORE, "--evaluate", "--frames", "1"]) == 2
+    assert "no lateral ground truth for frame(s) 1 (restore --evaluate" in refused(capsys, pkg, "ground_truth.lateral")
+    assert not (tmp_path / "out").exists()
