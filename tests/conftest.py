@@ -64,6 +64,21 @@ def manifest_dict(n_frames=3, width=32, height=24, actors=("car_0",), lateral=()
     }
 
 
+def write_recorded_images(root: Path, manifest: dict, background: Gaussians) -> None:
+    """Give every frame of ``manifest`` (a :func:`manifest_dict`) a recorded image under
+    ``root/images``: the background's own render, so reconstruction and scoring have a drive."""
+    from symdrive_core.io.images import write_image
+    from symdrive_core.scene.camera import CameraView
+    from symdrive_core.splat.render import SplatRenderer
+
+    render = SplatRenderer(background)
+    for cam in manifest["cameras"]:
+        for i, f in enumerate(cam["frames"]):
+            rel = f"images/{cam['name']}/{i:06d}.png"
+            write_image(root / rel, render(CameraView(f["world_to_camera"], f["K"], cam["width"], cam["height"])))
+            f["image"] = rel
+
+
 @pytest.fixture
 def make_package(tmp_path):
     """Write a tiny scene package (manifest + splat files) and return the manifest path."""

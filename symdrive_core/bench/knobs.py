@@ -17,6 +17,7 @@ import torch
 
 from ..diffusion.harmonize import CROP_MARGIN
 from ..pipeline.stages import StageOptions
+from ..scene import ManifestError
 from ..scene.ground_truth import has_insertion_truth, has_lateral_truth, with_placements
 from ..splat.constants import ALPHA_THRESHOLD
 from .accuracy_time import Setting
@@ -264,18 +265,23 @@ def shadow_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
 
 
 def package_settings(manifest, quick: bool = False) -> tuple[list[Setting], dict[str, str]]:
-    """Every knob the package's ground truth can score, and why the others are left out."""
+    """Every knob the package's ground truth can score, and why the others are left out; a
+    :class:`ManifestError` before any work when it can score none."""
     from ..diffusion.models import load_restorer
     from ..io.ply import read_splats
-    from ..scene.ground_truth import split_frames
+    from ..scene.ground_truth import missing_truth, split_frames
 
     budget = QUICK if quick else Budget()
+    heldout = bool(split_frames(manifest)[1]) and all(f.image for f in manifest.cameras[0].frames)
+    if not (heldout or has_lateral_truth(manifest) or has_insertion_truth(manifest)):
+        raise missing_truth(manifest, None, "nothing to score: no held-out recorded images and no lateral or "
+                            "insertion ground truth", "bench accuracy-time needs one of them")
     if not manifest.background_splats:
-        return [], {"all": "the package has no background splats to render"}
+        raise ManifestError(manifest.path or manifest.root, "no background splats to measure", "background.splats")
     gaussians = read_splats(manifest.resolve(manifest.background_splats))
     lateral, insertion = has_lateral_truth(manifest), has_insertion_truth(manifest)
     settings, skipped = [], {}
-    if split_frames(manifest)[1] and all(f.image for f in manifest.cameras[0].frames):
+    if heldout:
         settings += renderer_settings(manifest, gaussians, budget)
     else:
         skipped["renderer"] = "no held-out recorded frames"

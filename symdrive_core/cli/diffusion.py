@@ -326,6 +326,7 @@ def _restore(args) -> int:
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
     _check_frames(manifest, args)
+    _check_truth(manifest, args)
     restorer = load_restorer(
         args.backend,
         args.weights,
@@ -365,6 +366,20 @@ def _check_frames(manifest, args) -> None:
         if bad:
             raise InputError(manifest.path or manifest.root, f"{option} {bad[0]} is not a frame of camera "
                              f"{cam.name!r} (0 to {len(cam.frames) - 1})", f"cameras.{cam.name}.frames")
+
+
+def _check_truth(manifest, args) -> None:
+    """--evaluate scores against the lateral ground truth, which imported packages lack: say so
+    before the restorer loads. --refine only runs inside the evaluation."""
+    from ..errors import InputError
+    from ..optim.evaluate import lateral_targets
+
+    if args.evaluate:
+        lateral_targets(manifest, args.frames,
+                        "restore --evaluate needs it; drop --evaluate to restore without scoring")
+    elif args.refine:
+        raise InputError("restore", "needs --evaluate (`symdrive run` refines a package without ground truth)",
+                         "--refine")
 
 
 def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:

@@ -65,9 +65,11 @@ def _insert_eval(args) -> int:
     from ..io.ply import read_splats
     from ..optim.finetune import FinetuneConfig
     from ..scene import load_manifest
+    from ..scene.ground_truth import require_truth
     from . import print_json, write_json
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
+    require_truth(manifest, "insertion", "insert-eval needs it; `symdrive insert` renders a vehicle without scoring")
     harmonizer = None
     if not args.no_harmonize:
         from ..diffusion.models import load_restorer

@@ -41,6 +41,10 @@ def _reconstruct(args) -> int:
             setattr(cfg, name, getattr(args, name))
     if args.max_gaussians is not None:
         cfg.densify.max_gaussians = args.max_gaussians
+    if args.lateral:  # checked before hours of fitting, not after
+        from ..scene.ground_truth import require_truth
+
+        require_truth(manifest, "lateral", "reconstruct --lateral needs it; drop --lateral to reconstruct without it")
     out = args.out or manifest.root / "reconstruction"
     if args.out is None and not is_inside(out, manifest.root):  # a link shipped in the package
         raise ManifestError(manifest.path or manifest.root, "'reconstruction' leads out of the package (a link); "

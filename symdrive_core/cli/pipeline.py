@@ -83,7 +83,8 @@ def add_commands(sub) -> None:
     bench = sub.add_parser("bench", help="measurements").add_subparsers(dest="bench", required=True, metavar="BENCH")
     p = bench.add_parser("accuracy-time", help="quality against ground truth and time, knob by knob, in one run")
     p.add_argument("--out", required=True, help="directory for accuracy_time.md/.json and pareto.png")
-    p.add_argument("--package", help="scene package with ground truth (default: the built-in street world)")
+    p.add_argument("--package", help="scene package with held-out recorded images or ground truth to score against "
+                        "(default: the built-in street world)")
     p.add_argument("--quick", action="store_true", help="fewer frames, views and placements per setting")
     add_quiet_option(p)
     add_external_assets_option(p)

@@ -22,7 +22,7 @@ from ..io.ply import write_splats
 from ..metrics import psnr, ssim
 from ..optim.finetune import finetune_colors
 from ..scene import Manifest
-from ..scene.ground_truth import split_frames
+from ..scene.ground_truth import require_truth, split_frames
 from .assets import load_vehicle_asset
 from .baselines import naive, reinhard_transfer
 from .cast_shadow import vehicle_shadow
@@ -95,6 +95,7 @@ def evaluate_insertion(manifest: Manifest, background_gaussians, restorer=None, 
     ``restorer`` is the diffusion model (or pass a ready ``harmonizer``); without either only the
     naive and colour-transfer rows are measured. ``extractor`` adds a Frechet distance between
     real and inserted vehicle crops. ``details`` (a dict) receives per-placement scores and timings.
+    A package without ``ground_truth.insertion`` has nothing to score: a :class:`ManifestError`.
     """
     from ..splat.tensors import GaussianTensors
 
@@ -104,9 +105,8 @@ def evaluate_insertion(manifest: Manifest, background_gaussians, restorer=None, 
     background = None if background_gaussians is None else (
         background_gaussians if isinstance(background_gaussians, GaussianTensors)
         else GaussianTensors.from_gaussians(background_gaussians))
+    require_truth(manifest, "insertion")
     placements = held_out_placements(manifest)
-    if not placements:
-        return []
     timings: dict = {}
     results = [evaluate_placement(manifest, background, p, harmonizer, cfg, timings, progress)
                for p in tqdm(placements, desc="insertion", unit="placement", disable=not progress)]

@@ -18,7 +18,7 @@ from ..lane_paint import lane_truth
 from ..metrics import psnr, ssim
 from ..scene import Manifest
 from ..scene.camera import CameraView
-from ..scene.ground_truth import lateral_views, split_frames
+from ..scene.ground_truth import lateral_views, missing_truth, require_truth, split_frames
 from ..splat.render import SplatRenderer
 
 
@@ -38,11 +38,16 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
 
 
-def lateral_targets(manifest: Manifest, frames: list[int] | None) -> list:
-    """The package's lateral ground-truth views (of ``frames``, or all), in offset then frame order."""
+def lateral_targets(manifest: Manifest, frames: list[int] | None, needed_by: str | None = None) -> list:
+    """The package's lateral ground-truth views (of ``frames``, or all), in offset then frame order;
+    a :class:`ManifestError` on ``ground_truth.lateral`` when there are none to score against
+    (``needed_by``: which option asked, for the message)."""
+    require_truth(manifest, "lateral", needed_by)
     targets = [v for v in lateral_views(manifest) if frames is None or v.frame in frames]
     if not targets:
-        raise ValueError("the package has no lateral ground truth for these frames")
+        which = "any frame" if frames is None else "frame(s) " + ", ".join(map(str, frames[:5])) + (
+            ", ..." if len(frames) > 5 else "")
+        raise missing_truth(manifest, "lateral", f"no lateral ground truth for {which}", needed_by)
     return targets
 
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .camera import CameraView, SeenBy
-from .manifest import Manifest
+from .manifest import Manifest, ManifestError
 
 
 def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int], list[int]]:
@@ -98,6 +98,24 @@ def has_lateral_truth(manifest: Manifest) -> bool:
 
 def has_insertion_truth(manifest: Manifest) -> bool:
     return bool((manifest.ground_truth or {}).get("insertion"))
+
+
+def require_truth(manifest: Manifest, key: str, needed_by: str | None = None) -> None:
+    """Stop a scorer before its work when the package lacks ``ground_truth.<key>``.
+
+    Imported packages have no ground truth, which is normal input: the error is one line naming
+    the manifest and the field, and ``needed_by`` (``"restore --evaluate needs it; ..."``) says
+    which option asked for it and how to do without.
+    """
+    if not (manifest.ground_truth or {}).get(key):
+        raise missing_truth(manifest, key, f"no {key} ground truth to score against", needed_by)
+
+
+def missing_truth(manifest: Manifest, key: str | None, message: str, needed_by: str | None = None) -> ManifestError:
+    """The error of a scorer that finds no ``ground_truth.<key>`` (no ``key``: none of the block)
+    for what it was asked to score."""
+    return ManifestError(manifest.path or manifest.root, message + (f" ({needed_by})" if needed_by else ""),
+                         "ground_truth" + (f".{key}" if key else ""))
 
 
 def with_placements(manifest: Manifest, count: int) -> Manifest:

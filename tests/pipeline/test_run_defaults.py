@@ -7,12 +7,9 @@ import json
 import pytest
 
 from symdrive_core.cli import main
-from symdrive_core.io.images import write_image
 from symdrive_core.io.ply import read_splats, write_splats
 from symdrive_core.pipeline import stages
-from symdrive_core.scene.camera import CameraView
-from symdrive_core.splat.render import SplatRenderer
-from tests.conftest import manifest_dict, random_gaussians
+from tests.conftest import manifest_dict, random_gaussians, write_recorded_images
 
 
 @pytest.fixture
@@ -20,18 +17,13 @@ def recorded_package(tmp_path):
     """Three frames with recorded images (the background's own renders), offsets +-1 m, an inserted
     car harmonized and fine-tuned: every stage of the default plan has work."""
     root = tmp_path / "pkg"
-    (root / "images").mkdir(parents=True)
+    root.mkdir()
     d = manifest_dict(n_frames=3, lateral=(-1.0, 1.0), harmonize=True)
     d["effects"]["finetune"] = True
     background = random_gaussians(200, 0, 1, (10, 0, 1), 3.0)
     write_splats(root / "background.ply", background)
     write_splats(root / "car_0.ply", random_gaussians(50, 1, 10, spread=0.8))
-    render = SplatRenderer(background)
-    cam = d["cameras"][0]
-    for i, f in enumerate(cam["frames"]):
-        view = CameraView(f["world_to_camera"], f["K"], cam["width"], cam["height"])
-        write_image(root / "images" / f"{i:06d}.png", render(view))
-        f["image"] = f"images/{i:06d}.png"
+    write_recorded_images(root, d, background)
     (root / "manifest.json").write_text(json.dumps(d))
     return root
 
