@@ -321,8 +321,14 @@ def _restore(args) -> int:
 
     from ..diffusion.models import load_restorer
     from ..diffusion.sampler import SamplerConfig
+    from ..errors import SymDriveError
     from ..io.atomic import write_text_atomic
 
+    steps, n_start, samples = SAMPLER_DEFAULTS[args.backend]
+    steps, n_start = args.steps or steps, n_start if args.n_start is None else args.n_start
+    if n_start >= steps:
+        raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "
+                            f"below --steps {steps}: the sampler starts at step n_start of steps")
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
     _check_frames(manifest, args)
@@ -341,8 +347,7 @@ def _restore(args) -> int:
             else {}
         ),
     )
-    steps, n_start, samples = SAMPLER_DEFAULTS[args.backend]
-    sampler = SamplerConfig(steps=args.steps or steps, n_start=n_start if args.n_start is None else args.n_start,
+    sampler = SamplerConfig(steps=steps, n_start=n_start,
                             seed=args.seed, samples=args.samples or samples, max_memory_gib=args.max_memory)
     if args.evaluate:
         metrics = _evaluate(args, manifest, gaussians, restorer, sampler)

@@ -212,3 +212,14 @@ def test_restore_evaluate_on_frames_the_truth_leaves_out_is_one_line(bare_packag
     assert main(["restore", str(pkg), "--out", str(tmp_path / "out"), *RESTORE, "--evaluate", "--frames", "1"]) == 2
     assert "no lateral ground truth for frame(s) 1 (restore --evaluate" in refused(capsys, pkg, "ground_truth.lateral")
     assert not (tmp_path / "out").exists()
+
+
+def test_restore_steps_below_the_default_start_is_one_line(make_package, tmp_path, capsys):
+    """``--steps 1`` alone: the default start step (4) does not fit; one line naming both options."""
+    from symdrive_core.cli import main
+
+    pkg = make_package(n_frames=2, lateral=(1.0,))
+    assert main(["restore", str(pkg), "--steps", "1", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--n-start 4 (the default)" in err and "--steps 1" in err
+    assert not (tmp_path / "r").exists()

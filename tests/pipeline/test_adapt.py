@@ -68,10 +68,11 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
     load_builtin = models.load_builtin
     monkeypatch.setattr(models, "load_builtin", lambda path=defaults.DEFAULT_WEIGHTS: loaded.append(path)
                         or load_builtin(path))
-    fast = dict(frames=[0], offsets=(0.5,), sampler_steps=2, n_start=1, samples=1, eval_methods=("single_view",),
+    window = PlanOptions(refine=False, frames=[0], offsets=(0.5,))
+    fast = dict(sampler_steps=2, n_start=1, samples=1, eval_methods=("single_view",),
                 adapt=AdaptConfig(iters=2, offsets=(0.5,), cycle_offsets=(1.0,), cycle_iters=10))
     out = tmp_path / "out"
-    report = run_scene(drive, out, options=PlanOptions(refine=False), stage_options=StageOptions(**fast),
+    report = run_scene(drive, out, options=window, stage_options=StageOptions(**fast),
                        progress=False)
     row = next(s for s in report["stages"] if s["name"] == "adapt")
     assert row["ran"] and not row["reused"] and row["guided"] and row["steps"] == 2
@@ -81,7 +82,7 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
 
     # another run key (the sampler's seed) clears the run's outputs, not the adapted restorer
     made = weights.stat().st_mtime_ns
-    again = run_scene(drive, out, options=PlanOptions(refine=False), stage_options=StageOptions(**fast, seed=1),
+    again = run_scene(drive, out, options=window, stage_options=StageOptions(**fast, seed=1),
                       progress=False)
     row = next(s for s in again["stages"] if s["name"] == "adapt")
     assert row["ran"] and row["reused"] and weights.stat().st_mtime_ns == made
