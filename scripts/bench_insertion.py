@@ -30,7 +30,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     from symdrive_core.diffusion.models import load_restorer
-    from symdrive_core.insertion.evaluate import evaluate_insertion
+    from symdrive_core.eval.insertion import evaluate_insertion
     from symdrive_core.insertion.features import load_extractor
     from symdrive_core.insertion.harmonizer import restorer_harmonizer
     from symdrive_core.insertion.insert import InsertionConfig

@@ -33,6 +33,8 @@ import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from symdrive_core.bench import kernels_baseline
+from symdrive_core.bench.rasterize_baseline import rasterize_baseline
 from symdrive_core.splat import (
     GaussianTensors,
     Layer,
@@ -41,8 +43,6 @@ from symdrive_core.splat import (
     render_layers,
     render_oracle,
 )
-from symdrive_core.bench import kernels_baseline
-from symdrive_core.bench.rasterize_baseline import rasterize_baseline
 
 
 def make_scene(n, width, height, seed=0, deg=3, dtype=torch.float32, fov_deg=70.0):

@@ -114,9 +114,9 @@ def lane_iou(rows: list[dict]) -> dict:
 
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Sampler steps / ``N_start`` and the auto-regressive step ``d`` on lateral views."""
-    from ..diffusion.restore import run_lateral_restoration
     from ..diffusion.sampler import SamplerConfig
-    from ..optim.evaluate import evaluate_lateral
+    from ..eval.restoration import run_lateral_restoration
+    from ..eval.views import evaluate_lateral
     from ..scene.ground_truth import lateral_views, with_lateral_offsets
 
     scoped = with_lateral_offsets(manifest, budget.offsets)
@@ -160,7 +160,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
 def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Colour/opacity fine-tune iterations, scored as masked PSNR of held-out placements."""
 
-    from ..insertion.evaluate import evaluate_insertion
+    from ..eval.insertion import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
     from ..insertion.insert import InsertionConfig
     from ..optim.finetune import FinetuneConfig
@@ -198,7 +198,7 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
     region the sampler sees, scored as masked PSNR of the harmonized frame against the car truly in
     the scene; seconds per harmonized frame."""
 
-    from ..insertion.evaluate import evaluate_insertion
+    from ..eval.insertion import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
     from ..insertion.insert import InsertionConfig
     from ..optim.finetune import FinetuneConfig
@@ -232,8 +232,8 @@ def shadow_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     import time
     from dataclasses import replace
 
+    from ..eval.insertion import scores, truth
     from ..insertion.assets import load_vehicle_asset
-    from ..insertion.evaluate import scores, truth
     from ..insertion.insert import insert_frame
     from ..insertion.placements import held_out_placements
     from ..splat.tensors import GaussianTensors

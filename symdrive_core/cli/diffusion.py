@@ -377,7 +377,7 @@ def _check_truth(manifest, args) -> None:
     """--evaluate scores against the lateral ground truth, which imported packages lack: say so
     before the restorer loads. --refine only runs inside the evaluation."""
     from ..errors import InputError
-    from ..optim.evaluate import lateral_targets
+    from ..eval.views import lateral_targets
 
     if args.evaluate:
         lateral_targets(manifest, args.frames,
@@ -405,38 +405,13 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
 
 
 def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
-    import time
-
-    from ..diffusion.restore import run_lateral_restoration
+    from ..eval.restoration import RefineStudy, restoration_study
     from ..io.ply import write_splats
-    from ..optim.evaluate import evaluate_lateral
 
-    methods = tuple(args.methods)
-    t0 = time.perf_counter()
-    result = run_lateral_restoration(
-        manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=args.frames, progress=not args.quiet
-    )
-    rows = evaluate_lateral(manifest, gaussians, "raw_3dgs", args.frames) + result.rows
-    metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
-    if args.refine:
-        from ..diffusion.refine import RefineConfig, refine_gaussians
-        from ..diffusion.restore import restore_lateral_views
-
-        # As the pipeline does: the lateral views of every recorded frame (not only the scored
-        # ones) at --offsets, restored by the chain with --step; scored chains are reused.
-        t0 = time.perf_counter()
-        views = restore_lateral_views(manifest, gaussians, restorer, args.refine_frames, args.offsets, args.step,
-                                      sampler=sampler, chains=result.chains, progress=not args.quiet,
-                                      guided=args.geometry_guided)
-        restore_seconds = round(time.perf_counter() - t0, 1)
-        cfg = RefineConfig(iters=args.refine_iters)
-        refined, stats = refine_gaussians(manifest, gaussians, views, cfg, progress=not args.quiet)
+    refine = (RefineStudy(args.offsets, args.step, args.refine_frames, args.refine_iters, args.geometry_guided)
+              if args.refine else None)
+    metrics, refined = restoration_study(manifest, gaussians, restorer, methods=tuple(args.methods), sampler=sampler,
+                                         frames=args.frames, refine=refine, progress=not args.quiet)
+    if refined is not None:
         write_splats(args.out / "refined.ply", refined)
-        # The control: the same refinement on the recorded views alone, so the table shows what
-        # the restored views add beyond training the reconstruction longer.
-        control, control_stats = refine_gaussians(manifest, gaussians, [], cfg, progress=not args.quiet)
-        metrics["refine"] = {**stats, "step_m": args.step, "frames": sorted({v.frame for v in views}), "offsets_m": list(args.offsets),
-                             "restore_seconds": restore_seconds, "control_seconds": control_stats["seconds"]}
-        metrics["lateral"] += evaluate_lateral(manifest, refined, "refined", args.frames)
-        metrics["lateral"] += evaluate_lateral(manifest, control, "refined_recorded_only", args.frames)
     return metrics

@@ -59,7 +59,7 @@ def _insert(args) -> int:
 
 
 def _insert_eval(args) -> int:
-    from ..insertion.evaluate import evaluate_insertion
+    from ..eval.insertion import evaluate_insertion
     from ..insertion.features import load_extractor
     from ..insertion.insert import InsertionConfig
     from ..io.ply import read_splats

@@ -51,11 +51,14 @@ def _reconstruct(args) -> int:
                             "pass --out", "reconstruction")
     result = reconstruct(manifest, out, cfg, resume=args.resume, progress=not args.quiet)
     metrics = result.metrics
-    if args.lateral:
+    if metrics["heldout_frames"] or args.lateral:
+        from ..eval.views import evaluate_heldout, evaluate_lateral
         from ..io.atomic import write_text_atomic
-        from ..optim.evaluate import evaluate_lateral
 
-        metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
+        if metrics["heldout_frames"]:
+            metrics["heldout"] = evaluate_heldout(manifest, result.gaussians, metrics["heldout_frames"])
+        if args.lateral:
+            metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
         write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")
     ply = (Path(out) / "background.ply").resolve()
     if not args.no_link and ply.is_relative_to(manifest.root.resolve()):

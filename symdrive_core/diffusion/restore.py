@@ -1,5 +1,5 @@
-"""Auto-regressive lateral restoration, its evaluation against Cycles ground truth, and the
-restored views that 3DGS refinement trains on.
+"""Auto-regressive lateral restoration, and the restored views that 3DGS refinement trains on
+(its evaluation against ground truth: :mod:`symdrive_core.eval.restoration`).
 
 From the recorded view at C_0 the chain walks outward with step ``d``: the view at ``d`` is
 restored from ``(I_0, render(2d))``, the one at ``2d`` from ``(restored I_d, render(3d))``, and
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -31,7 +31,6 @@ import torch
 from ..conventions import both_sides
 from ..gaussians import Gaussians
 from ..io.images import read_image
-from ..optim.evaluate import lane_truths, lateral_rows, lateral_targets, score_view, with_ceiling
 from ..scene import Manifest
 from ..scene.camera import CameraView, SeenBy
 from ..scene.ground_truth import truth_camera
@@ -200,13 +199,6 @@ class RestoredView(SeenBy):
         return cls(frame, offset_m, CameraView.of_frame(cam, frame).shifted(offset_m), image)
 
 
-@dataclass
-class LateralRestoration:
-    rows: list[dict]
-    views: dict[str, list[RestoredView]] = field(default_factory=dict)
-    chains: dict[int, LateralChain] = field(default_factory=dict)  # by frame, their restorations cached
-
-
 def restore_lateral_views(
     manifest: Manifest,
     gaussians: Gaussians,
@@ -230,7 +222,7 @@ def restore_lateral_views(
     frames = range(len(cam.frames)) if frames is None else frames
     render = SplatRenderer(gaussians)
     chains = {} if chains is None else chains
-    warper = _warper(manifest, cam, gaussians) if guided else None
+    warper = chain_warper(manifest, cam, gaussians) if guided else None
     signed = both_sides(offsets)
     views = []
     for fi in tqdm(frames, desc="restore", unit="frame", disable=not progress):
@@ -242,74 +234,8 @@ def restore_lateral_views(
     return views
 
 
-def _warper(manifest: Manifest, cam, gaussians: Gaussians):
+def chain_warper(manifest: Manifest, cam, gaussians: Gaussians):
+    """The lateral camera's warper for the geometry-guided chain."""
     from .warp import package_warper
 
     return package_warper(manifest, cam, gaussians)
-
-
-def run_lateral_restoration(
-    manifest: Manifest,
-    gaussians: Gaussians,
-    restorer,
-    *,
-    methods=("single_view", "ar_d0.5", "ar_d1.0"),
-    sampler: SamplerConfig = DEFAULT,
-    frames: list[int] | None = None,
-    progress: bool = True,
-    warper=None,
-    render: SplatRenderer | None = None,
-) -> LateralRestoration:
-    """Restore every lateral ground-truth view of the package (or of ``frames``) with each
-    method, score it against the Cycles image, and keep the restored views. ``warper``: the
-    lateral camera's, for the geometry-guided methods (default: fitted here when they are asked for);
-    ``render``: a renderer of ``gaussians`` the caller already holds."""
-    from tqdm import tqdm
-
-    targets = lateral_targets(manifest, frames)
-    truths = lane_truths(manifest, targets)
-    for m in methods:
-        if m != WARP:
-            method_step(m)  # an unknown name fails before any work
-    render = render or SplatRenderer(gaussians)
-    cam = truth_camera(manifest)
-    if warper is None and needs_warp(methods):
-        warper = _warper(manifest, cam, gaussians)
-    scores: dict[tuple[float, str], list] = {}
-    ceilings: dict[float, list[float]] = {}
-    seconds: dict[str, list[float]] = {}
-    result = LateralRestoration(rows=[])
-    by_frame: dict[int, list] = {}
-    for v in targets:
-        by_frame.setdefault(v.frame, []).append(v)
-    bar = tqdm(total=len(targets) * len(methods), desc="restore", unit="view", disable=not progress)
-    for fi, views in sorted(by_frame.items()):
-        chain = result.chains[fi] = LateralChain.for_frame(manifest, cam, fi, restorer, render, sampler, warper)
-        for v in sorted(views, key=lambda v: abs(v.offset_m)):
-            gt = read_image(manifest.resolve(v.image), channels=3)
-            lanes = with_ceiling(truths.get((v.offset_m, v.frame)), gt, v.offset_m, ceilings)
-            for method in methods:
-                before, t0 = chain.samples, time.perf_counter()
-                img = chain.by_method(v.offset_m, method)
-                if chain.samples > before:
-                    seconds.setdefault(method, []).append(
-                        (time.perf_counter() - t0) / (chain.samples - before)
-                    )
-
-                scores.setdefault((v.offset_m, method), []).append(score_view(img, gt, lanes))
-                result.views.setdefault(method, []).append(
-                    RestoredView(fi, v.offset_m, v.camera, img)
-                )
-                bar.update()
-    bar.close()
-    warp_seconds = [t for c in result.chains.values() for t in c.warp_seconds]
-    if WARP in methods and warp_seconds:  # the render at the shifted camera included
-        seconds[WARP] = warp_seconds
-    result.rows = lateral_rows(scores, {m: float(np.mean(s)) for m, s in seconds.items()}, ceilings)
-    return result
-
-
-def evaluate_lateral_restoration(manifest: Manifest, gaussians: Gaussians, model, **options) -> list[dict]:
-    """``metrics.lateral`` rows (``{"offset_m", "method", "psnr", "ssim", ...}``) for each method;
-    options as :func:`run_lateral_restoration`."""
-    return run_lateral_restoration(manifest, gaussians, model, **options).rows

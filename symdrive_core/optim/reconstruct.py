@@ -315,9 +315,8 @@ def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *,
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
                 resume: bool = False, progress: bool = True) -> ReconstructResult:
     """Fit background Gaussians to the training frames; write ``out/background.ply``,
-    ``out/checkpoint/`` and ``out/metrics.json`` (held-out PSNR/SSIM, timings)."""
-    from .evaluate import evaluate_heldout
-
+    ``out/checkpoint/`` and ``out/metrics.json`` (the fit: iterations, timings, frames). Scoring the
+    result is the caller's (``eval.views.evaluate_heldout`` on the held-out frames)."""
     cfg = cfg or ReconstructConfig()
     out = Path(out)
     train_frames, heldout = split_frames(manifest, cfg.holdout_every)
@@ -331,7 +330,5 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
                "extent_m": log["extent_m"], "densify": log["densify"]}
-    if heldout:
-        metrics["heldout"] = evaluate_heldout(manifest, g, heldout)
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
     return ReconstructResult(g, metrics, out)

@@ -216,14 +216,11 @@ def restore_stage(ctx) -> StageResult:
     with lateral ground truth, also score raw 3DGS and the ablations on those views."""
     from tqdm import tqdm
 
-    from ..diffusion.restore import (
-        LateralChain,
-        RestoredView,
-        run_lateral_restoration,
-    )
+    from ..diffusion.restore import LateralChain, RestoredView
     from ..diffusion.warp import WarpError, package_warper
+    from ..eval.restoration import run_lateral_restoration
+    from ..eval.views import evaluate_lateral
     from ..io.images import read_image, write_image
-    from ..optim.evaluate import evaluate_lateral
     from ..scene.ground_truth import truth_camera, with_lateral_offsets
     from ..splat.render import SplatRenderer
 
@@ -281,8 +278,8 @@ def refine_stage(ctx) -> StageResult:
     """Fine-tune the background on the recorded views plus the restored lateral views. A refined
     PLY already in the folder (a run that stopped after refining) is reused, not refitted."""
     from ..diffusion.refine import RefineConfig, refine_gaussians
+    from ..eval.views import evaluate_lateral
     from ..io.ply import read_splats, write_splats
-    from ..optim.evaluate import evaluate_lateral
 
     path = ctx.tree.path("refine", "background.ply")
     if path.exists():
@@ -395,9 +392,9 @@ def finetune_stage(ctx) -> StageResult:
 @stage("evaluate")
 def evaluate_stage(ctx) -> StageResult:
     """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
-    from ..insertion.evaluate import evaluate_insertion
+    from ..eval.insertion import evaluate_insertion
+    from ..eval.views import evaluate_heldout
     from ..insertion.insert import InsertionConfig
-    from ..optim.evaluate import evaluate_heldout
     from ..optim.finetune import FinetuneConfig
     from ..scene.ground_truth import split_frames
 

@@ -2,8 +2,8 @@ import numpy as np
 
 from symdrive_core.diffusion.refine import RefineConfig, refine_gaussians
 from symdrive_core.diffusion.restore import RestoredView
+from symdrive_core.eval.views import evaluate_lateral
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.optim.evaluate import evaluate_lateral
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.ground_truth import lateral_views
 from tests.optim.conftest import render_truth, synthetic_package  # noqa: F401  (fixture)

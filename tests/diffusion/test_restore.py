@@ -142,7 +142,8 @@ def test_camera_shift_matches_conventions():
 
 def test_lateral_views_of_every_frame_reuse_the_scored_chains(synthetic_package):  # noqa: F811
     """Refinement's views come from one chain per frame; chains built while scoring are reused."""
-    from symdrive_core.diffusion.restore import restore_lateral_views, run_lateral_restoration
+    from symdrive_core.diffusion.restore import restore_lateral_views
+    from symdrive_core.eval.restoration import run_lateral_restoration
     from symdrive_core.scene import load_manifest
 
     root, truth = synthetic_package

@@ -204,12 +204,12 @@ LAYERS = (
     "io",  # files in and out
     "scene",  # the package: manifest, cameras, poses, road, ground truth
     "splat",  # the renderer
-    "lane_paint",  # lane markings and their truth
-    "optim",  # fitting: reconstruction, fine-tuning, the held-out and lateral scorers
+    "optim",  # fitting: reconstruction, fine-tuning
     "importers",  # recorded drives in
     "diffusion",  # the restorer and its chain
     "traffic",  # SUMO traffic into a package
     "insertion",  # inserted vehicles
+    "eval",  # the scorers: held-out, lateral, the restoration study, insertion, lane paint
     "pipeline",  # plan and stages
     "sim",  # the closed loop
     "bench",  # measurements of the pipeline

@@ -14,10 +14,10 @@ import pytest
 
 from symdrive_core import conventions
 from symdrive_core.cli import main
+from symdrive_core.eval.views import evaluate_lateral
 from symdrive_core.importers.similarity import apply_camera, transform_gaussians
 from symdrive_core.io.images import read_image, write_image
 from symdrive_core.io.ply import read_splats, write_splats
-from symdrive_core.optim.evaluate import evaluate_lateral
 from symdrive_core.scene import check_files, load_manifest
 from symdrive_core.scene.ground_truth import lateral_views, with_lateral_offsets
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from symdrive_core.errors import InputError
+from symdrive_core.eval.lane_paint import lane_truth
 from symdrive_core.io.images import read_image
-from symdrive_core.lane_paint import lane_truth
 from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.ground_truth import lane_masks, lateral_views
@@ -73,8 +73,8 @@ def test_a_missing_lane_mask_stops_restore_evaluate_with_exit_2(tmp_path, capsys
 def test_lateral_rows_carry_lane_iou_and_its_ceiling():
     """``evaluate_lateral`` rows (raw 3DGS at 3 m, frame 12): lane IoU of the render and, beside
     it, the segmenter's IoU on the Cycles images of the same views."""
+    from symdrive_core.eval.views import evaluate_lateral
     from symdrive_core.io.ply import read_splats
-    from symdrive_core.optim.evaluate import evaluate_lateral
     from symdrive_core.scene.ground_truth import with_lateral_offsets
 
     scoped = with_lateral_offsets(MANIFEST, [-3.0, 3.0])
@@ -88,7 +88,7 @@ def test_lateral_rows_carry_lane_iou_and_its_ceiling():
 
 
 def test_rows_have_no_lane_iou_without_lane_masks():
-    from symdrive_core.optim.evaluate import lateral_rows
+    from symdrive_core.eval.views import lateral_rows
 
     rows = lateral_rows({(1.0, "raw_3dgs"): [(25.0, 0.8), (27.0, 0.9)]}, {}, {})
     assert rows == [{"offset_m": 1.0, "method": "raw_3dgs", "psnr": 26.0, "ssim": 0.85, "frames": 2}]

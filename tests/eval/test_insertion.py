@@ -1,12 +1,11 @@
 import numpy as np
 
-from symdrive_core.insertion.evaluate import evaluate_insertion
+from symdrive_core.eval.insertion import evaluate_insertion
 from symdrive_core.insertion.insert import InsertionConfig
 from symdrive_core.insertion.placements import held_out_placements, training_views
 from symdrive_core.optim.finetune import FinetuneConfig
 from symdrive_core.scene import load_manifest
-
-from . import package
+from tests.insertion import package
 
 
 def test_insertion_rows_on_a_package_with_known_truth(tmp_path):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from symdrive_core import conventions
-from symdrive_core.lane_paint import LaneTruth, road_region, segment_lane_paint
+from symdrive_core.eval.lane_paint import LaneTruth, road_region, segment_lane_paint
 from symdrive_core.metrics import mask_iou
 from symdrive_core.scene.road import Road
 

@@ -14,12 +14,12 @@ import numpy as np
 
 from ..gaussians import Gaussians
 from ..io.images import read_image
-from ..lane_paint import lane_truth
 from ..metrics import psnr, ssim
 from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..scene.ground_truth import lateral_views, missing_truth, require_truth, split_frames
 from ..splat.render import SplatRenderer
+from .lane_paint import lane_truth
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,

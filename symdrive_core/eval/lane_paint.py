@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import conventions
-from .metrics import mask_iou
-from .scene.road import Road, project_onto
+from .. import conventions
+from ..metrics import mask_iou
+from ..scene.road import Road, project_onto
 
 
 @dataclass(frozen=True)
@@ -114,8 +114,8 @@ class LaneTruth:
 def lane_truth(manifest, mask: str, K, camera_to_world) -> LaneTruth:
     """The package's lane mask ``mask`` (relative to it) of the camera (K, camera_to_world), with
     the road region of the package's ``ground_truth.road`` it is scored in."""
-    from .io.images import read_mask
-    from .scene.road import road_from_json
+    from ..io.images import read_mask
+    from ..scene.road import road_from_json
 
     road = road_from_json(manifest.ground_truth["road"], manifest.path or manifest.root)
     return LaneTruth.for_camera(read_mask(manifest.resolve(mask)) > 0.5, K, camera_to_world, road)

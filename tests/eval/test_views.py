@@ -1,6 +1,6 @@
 import numpy as np
 
-from symdrive_core.optim.evaluate import evaluate_heldout, evaluate_lateral
+from symdrive_core.eval.views import evaluate_heldout, evaluate_lateral
 from symdrive_core.scene import load_manifest
 
 

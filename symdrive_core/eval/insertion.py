@@ -17,19 +17,19 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from ..insertion.assets import load_vehicle_asset
+from ..insertion.baselines import naive, reinhard_transfer
+from ..insertion.cast_shadow import vehicle_shadow
+from ..insertion.features import crop_frechet, vehicle_crop
+from ..insertion.harmonizer import Harmonizer, restorer_harmonizer
+from ..insertion.insert import InsertionConfig, finetune_sample, insert_frame
+from ..insertion.placements import HeldOut, camera_view, held_out_placements, training_views
 from ..io.images import read_image, read_mask
 from ..io.ply import write_splats
 from ..metrics import psnr, ssim
 from ..optim.finetune import finetune_colors
 from ..scene import Manifest
 from ..scene.ground_truth import require_truth, split_frames
-from .assets import load_vehicle_asset
-from .baselines import naive, reinhard_transfer
-from .cast_shadow import vehicle_shadow
-from .features import crop_frechet, vehicle_crop
-from .harmonizer import Harmonizer, restorer_harmonizer
-from .insert import InsertionConfig, finetune_sample, insert_frame
-from .placements import HeldOut, camera_view, held_out_placements, training_views
 
 METHODS = ("naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow")
 
