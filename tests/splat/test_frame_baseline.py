@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 
-from symdrive_core.splat import rasterize
 from symdrive_core.bench.rasterize_baseline import rasterize_baseline
+from symdrive_core.splat import rasterize
 from symdrive_core.splat.sh import sh_to_color
 
 
