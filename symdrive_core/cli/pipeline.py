@@ -31,6 +31,7 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--no-refine", action="store_true", help="plan without 3DGS refinement")
     p.add_argument("--no-adapt", action="store_true", help="plan without adapting the restorer to the drive")
+    _add_window_options(p)
     add_json_option(p, "the plan")
     add_external_assets_option(p)
     p.set_defaults(func=_plan)
@@ -40,9 +41,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out", help="output directory (default: the manifest's `output`, inside the package)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--no-refine", action="store_true", help="run without 3DGS refinement")
-    add_frames_option(p, help="the frame window: render, restore and harmonize only these recorded frames "
-                              "(default: all; reconstruction fits every frame)")
-    add_offsets_option(p, help="lateral views to restore instead of the manifest's effects.lateral_offsets")
+    _add_window_options(p)
     p.add_argument("--no-adapt", action="store_true",
                    help="restore with the shipped restorer even on a drive its weights were not trained on")
     p.add_argument("--adapt-iters", type=positive_int,
@@ -91,13 +90,28 @@ def add_commands(sub) -> None:
     p.set_defaults(func=_accuracy_time)
 
 
+def _add_window_options(p) -> None:
+    """``--frames`` and ``--offsets`` of ``plan`` and ``run``: the same window for both."""
+    add_frames_option(p, help="the frame window: render, restore and harmonize only these recorded frames "
+                              "(default: all; reconstruction fits every frame)")
+    add_offsets_option(p, help="lateral views to restore instead of the manifest's effects.lateral_offsets")
+
+
+def _plan_options(args):
+    """The plan options of ``plan`` and ``run``: both plan the same run from the same flags."""
+    from ..conventions import both_sides
+    from ..pipeline.plan import PlanOptions
+
+    return PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt, frames=args.frames,
+                       offsets=None if args.offsets is None else tuple(both_sides(args.offsets)))
+
+
 def _plan(args) -> int:
-    from ..pipeline.plan import PlanOptions, format_plan, make_plan
+    from ..pipeline.plan import format_plan, make_plan
     from ..scene import load_manifest
     from . import write_json
 
-    plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets),
-                     PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt))
+    plan = make_plan(load_manifest(args.package, allow_external=args.allow_external_assets), _plan_options(args))
     if args.json:
         write_json(plan.to_json(), args.json)
     else:
@@ -108,17 +122,13 @@ def _plan(args) -> int:
 def _run(args) -> int:
     from dataclasses import replace
 
-    from ..conventions import both_sides
-    from ..pipeline.plan import PlanOptions
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
 
     stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
     budget = {"iters": args.adapt_iters, "max_seconds": args.adapt_seconds}
     stage_options.adapt = replace(stage_options.adapt, **{k: v for k, v in budget.items() if v is not None})
-    options = PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt, frames=args.frames,
-                          offsets=None if args.offsets is None else tuple(both_sides(args.offsets)))
-    report = run_scene(args.package, args.out, options=options,
+    report = run_scene(args.package, args.out, options=_plan_options(args),
                        device=args.device, progress=not args.quiet, force=args.force,
                        allow_external=args.allow_external_assets, stage_options=stage_options)
     for s in report["stages"]:

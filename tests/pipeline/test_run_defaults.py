@@ -84,3 +84,10 @@ def test_rerun_after_a_failed_stage_reuses_finished_work(recorded_package, tmp_p
     assert {p: p.stat().st_mtime_ns for p in (out / "restore").rglob("*.png")} == restored
     report = _stages(out)
     assert report["refine"]["ran"] and report["refine"]["reused"] and report["harmonize"]["ran"]
+
+
+def test_plan_takes_the_same_window_as_run(recorded_package, capsys):
+    assert main(["plan", str(recorded_package), "--frames", "1", "--offsets", "0.5", "--json"]) == 0
+    stages = {s["name"]: s for s in json.loads(capsys.readouterr().out)["stages"]}
+    assert stages["render"]["frames"] == [1] and stages["restore"]["frames"] == [1]
+    assert stages["restore"]["offsets"] == [-0.5, 0.5]
