@@ -142,7 +142,7 @@ def main(argv=None) -> int:
         build_s = time.perf_counter() - t0
         opts = StageOptions(insertion=InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_iters)))
         opts.refine = replace(opts.refine, iters=max(args.refine_iters, 1))
-        sampler = {"max_memory_gib": opts.sampler.max_memory_gib, "samples": args.samples}
+        sampler = {"max_memory_gib": args.max_memory, "samples": args.samples}
         opts.sampler = replace(opts.sampler, **{k: v for k, v in sampler.items() if v})
         t0 = time.perf_counter()
         report = run_scene(root / "package", root / "out", options=PlanOptions(refine=args.refine_iters > 0),
@@ -157,7 +157,8 @@ def main(argv=None) -> int:
               "max_memory_gib": opts.sampler.max_memory_gib, "build_seconds": round(build_s, 1),
               "run_seconds": round(total, 1), "seconds_per_frame": stages,
               "peak_rss_gib": round(peak / 2**30, 2)}
-    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), max memory {opts.sampler.max_memory_gib} GiB")
+    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), "
+          f"max memory {opts.sampler.max_memory_gib} GiB")
     for name, sec in stages.items():
         print(f"  {name:<10} {sec:8.2f} s/frame")
     print(f"  total run {total:.1f} s, package built in {build_s:.1f} s, peak RSS {result['peak_rss_gib']} GiB")

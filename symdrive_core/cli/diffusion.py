@@ -95,7 +95,7 @@ def add_commands(sub) -> None:
     )
     p.add_argument("--cycle-iters", type=positive_int,
                    help=f"iterations of each cycle reconstruction (default {default_of(CycleConfig, 'iters')})")
-    p.add_argument("--cycle-max-gaussians", type=positive_int,
+    p.add_argument("--cycle-max-gaussians", type=int,
                    help=f"densification cap of each cycle reconstruction "
                         f"(default {default_of(CycleConfig, 'max_gaussians')})")
     p.add_argument("--warps", action="store_true",

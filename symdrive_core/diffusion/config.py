@@ -41,6 +41,7 @@ class UNetConfig:
         d = {"output": "v", **d}  # checkpoints written before "output" existed predict v
         return cls(**{**d, "mults": tuple(d["mults"])})
 
+
 @dataclass(frozen=True)
 class SamplerConfig:
     steps: int = 50
@@ -59,6 +60,7 @@ class SamplerConfig:
         from .tiling import TileOptions
 
         return TileOptions(max_memory_gib=self.max_memory_gib, tile=self.tile, overlap=self.tile_overlap)
+
 
 @dataclass
 class TrainConfig:
@@ -91,13 +93,15 @@ class TrainConfig:
         return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output,
                           guide_channels=GUIDE_CHANNELS if self.guide else 0)
 
+
 @dataclass
 class RefineConfig:
-    iters: int = 900  # measured with the pipeline's restored views (symdrive bench accuracy-time)
+    iters: int = 900
     ssim_lambda: float = 0.2
     depth_weight: float = 0.1
     novel_weight: float = 1.0
     seed: int = 0
+
 
 @dataclass
 class FluxTrainConfig:

@@ -149,8 +149,6 @@ class UNet(nn.Module):
         return ((1 - tb) ** 2 * s2 + tb**2) / s2
 
 
-
-
 def with_guide(net: UNet, channels: int = GUIDE_CHANNELS) -> UNet:
     """``net`` with ``channels`` guide inputs whose first-layer weights are zero: it computes
     exactly what ``net`` does whatever the guide, so fine-tuning starts from the trained network
