@@ -25,6 +25,7 @@ import shutil
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -108,8 +109,8 @@ def main(argv=None) -> int:
     p.add_argument("--height", type=int)
     p.add_argument("--gaussians", type=int, help="background Gaussians after splitting (default 3000000)")
     p.add_argument("--frames", type=int, choices=(1, 2), help="frames to run (default 2, 1 with --quick)")
-    p.add_argument("--max-memory", type=float, default=4.0, metavar="GiB",
-                   help="memory for one restorer evaluation (StageOptions.max_memory_gib)")
+    p.add_argument("--max-memory", type=float, metavar="GiB",
+                   help="memory for one restorer evaluation (default: the pipeline's)")
     p.add_argument("--samples", type=int, help="restoration samples per view (default: the pipeline's)")
     p.add_argument("--finetune-iters", type=int, default=100)
     p.add_argument("--refine-iters", type=int, default=0, help="3DGS refinement iterations (0: not run)")
@@ -122,6 +123,8 @@ def main(argv=None) -> int:
     gaussians = args.gaussians or (1_000_000 if args.quick else 3_000_000)
     frames = args.frames or (1 if args.quick else 2)
 
+    from symdrive_core.insertion.config import InsertionConfig
+    from symdrive_core.optim.config import FinetuneConfig
     from symdrive_core.pipeline.plan import PlanOptions
     from symdrive_core.pipeline.run import run_scene
     from symdrive_core.pipeline.stages import StageOptions
@@ -137,10 +140,10 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         build_package(root / "package", width, height, gaussians, frames)
         build_s = time.perf_counter() - t0
-        opts = StageOptions(max_memory_gib=args.max_memory, finetune_steps=args.finetune_iters,
-                            refine_iters=max(args.refine_iters, 1))
-        if args.samples:
-            opts.samples = args.samples
+        opts = StageOptions(insertion=InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_iters)))
+        opts.refine = replace(opts.refine, iters=max(args.refine_iters, 1))
+        sampler = {"max_memory_gib": args.max_memory, "samples": args.samples}
+        opts.sampler = replace(opts.sampler, **{k: v for k, v in sampler.items() if v})
         t0 = time.perf_counter()
         report = run_scene(root / "package", root / "out", options=PlanOptions(refine=args.refine_iters > 0),
                            progress=not args.quiet, stage_options=opts)
@@ -151,10 +154,11 @@ def main(argv=None) -> int:
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kilobytes
     stages = {s["name"]: round(s["seconds"] / frames, 2) for s in report["stages"] if s.get("ran") and "seconds" in s}
     result = {"width": width, "height": height, "gaussians": gaussians, "frames": frames,
-              "max_memory_gib": args.max_memory, "build_seconds": round(build_s, 1),
+              "max_memory_gib": opts.sampler.max_memory_gib, "build_seconds": round(build_s, 1),
               "run_seconds": round(total, 1), "seconds_per_frame": stages,
               "peak_rss_gib": round(peak / 2**30, 2)}
-    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), max memory {args.max_memory} GiB")
+    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), "
+          f"max memory {opts.sampler.max_memory_gib} GiB")
     for name, sec in stages.items():
         print(f"  {name:<10} {sec:8.2f} s/frame")
     print(f"  total run {total:.1f} s, package built in {build_s:.1f} s, peak RSS {result['peak_rss_gib']} GiB")

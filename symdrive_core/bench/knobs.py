@@ -10,7 +10,7 @@ Seconds are the work itself (per frame, per view or per placement), not loading.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -114,7 +114,7 @@ def lane_iou(rows: list[dict]) -> dict:
 
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
     """Sampler steps / ``N_start`` and the auto-regressive step ``d`` on lateral views."""
-    from ..diffusion.sampler import SamplerConfig
+    from ..diffusion.config import SamplerConfig
     from ..eval.restoration import run_lateral_restoration
     from ..eval.views import evaluate_lateral
     from ..scene.ground_truth import lateral_views, with_lateral_offsets
@@ -128,11 +128,12 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
         return {"psnr": float(np.mean([r["psnr"] for r in rows])), "ssim": float(np.mean([r["ssim"] for r in rows])),
                 **lane_iou(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
 
-    def measure(method: str, steps: int, n_start: int, samples: int = DEFAULTS.samples):
+    def measure(method: str, steps: int, n_start: int, samples: int = DEFAULTS.sampler.samples):
         def run() -> dict:
             t0 = time.perf_counter()
             res = run_lateral_restoration(scoped, gaussians, restorer, methods=(method,), frames=frames,
-                                          sampler=SamplerConfig(steps, n_start, DEFAULTS.seed, samples), progress=False)
+                                          sampler=SamplerConfig(steps, n_start, DEFAULTS.sampler.seed, samples),
+                                          progress=False)
             views = len(res.views.get(method, []))
             return {"psnr": float(np.mean([r["psnr"] for r in res.rows])),
                     "ssim": float(np.mean([r["ssim"] for r in res.rows])), **lane_iou(res.rows),
@@ -140,14 +141,14 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
         return run
 
     d = f"ar_d{DEFAULTS.ar_step:g}"
-    s, n = DEFAULTS.sampler_steps, DEFAULTS.n_start
+    s, n = DEFAULTS.sampler.steps, DEFAULTS.sampler.n_start
     t_start = 1.0 - n / s  # every sampler-steps setting starts at the default's noise level
     steps = dict.fromkeys((s, 10, 20, 50))
     return [
         *[Setting("sampler steps", f"{k} (from step {round(k * (1 - t_start))})", k == s,
                   measure(d, k, round(k * (1 - t_start)))) for k in steps],
-        *[Setting("samples averaged", str(k), k == DEFAULTS.samples, measure(d, s, n, k))
-          for k in dict.fromkeys((1, 4, DEFAULTS.samples))],
+        *[Setting("samples averaged", str(k), k == DEFAULTS.sampler.samples, measure(d, s, n, k))
+          for k in dict.fromkeys((1, 4, DEFAULTS.sampler.samples))],
         # the paper's protocol: 50 steps, one sample
         *[Setting("N_start of 50 steps, 1 sample", f"{k} (t = {1 - k / 50:.2f})", abs(k / 50 - n / s) < 1e-9,
                   measure(d, 50, k, 1)) for k in dict.fromkeys((0, 5, 10, 15, round(50 * n / s)))],
@@ -162,11 +163,8 @@ def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
 
     from ..eval.insertion import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
-    from ..insertion.insert import InsertionConfig
-    from ..optim.finetune import FinetuneConfig
 
-    harmonize = restorer_harmonizer(restorer, steps=DEFAULTS.harmonize_steps, start_fraction=DEFAULTS.harmonize_start,
-                                    samples=DEFAULTS.harmonize_samples, seed=DEFAULTS.seed)
+    harmonize = restorer_harmonizer(restorer, DEFAULTS.harmonize)
     cache: dict[bytes, np.ndarray] = {}
 
     def harmonizer(image, region):  # the same targets for every setting: harmonize once
@@ -180,8 +178,7 @@ def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
     def measure(steps: int):
         def run() -> dict:
             details: dict = {}
-            cfg = InsertionConfig(train_views=DEFAULTS.insertion_train_views,
-                                  finetune=FinetuneConfig(steps=max(steps, 1), seed=DEFAULTS.seed))
+            cfg = replace(DEFAULTS.insertion, finetune=replace(DEFAULTS.insertion.finetune, steps=max(steps, 1)))
             rows = evaluate_insertion(scoped, gaussians, harmonizer=harmonizer, config=cfg, details=details,
                                       progress=False)
             row = next(r for r in rows if r["method"] == ("finetuned" if steps else "naive"))
@@ -189,8 +186,9 @@ def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
             return {"psnr": row["masked_psnr"], "ssim": row["masked_ssim"], "seconds": seconds, "per": "placement"}
         return run
 
-    return [Setting("fine-tune iterations", str(k), k == DEFAULTS.finetune_steps, measure(k))
-            for k in dict.fromkeys((0, 50, 150, DEFAULTS.finetune_steps, 600))]
+    default = DEFAULTS.insertion.finetune.steps
+    return [Setting("fine-tune iterations", str(k), k == default, measure(k))
+            for k in dict.fromkeys((0, 50, 150, default, 600))]
 
 
 def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
@@ -200,17 +198,15 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
 
     from ..eval.insertion import evaluate_insertion
     from ..insertion.harmonizer import restorer_harmonizer
-    from ..insertion.insert import InsertionConfig
-    from ..optim.finetune import FinetuneConfig
 
     scoped = with_placements(manifest, budget.placements)
 
     def measure(steps: int, samples: int, margin: int | None = CROP_MARGIN):
         def run() -> dict:
             details: dict = {}
-            harmonizer = restorer_harmonizer(restorer, steps=steps, start_fraction=DEFAULTS.harmonize_start,
-                                             samples=samples, seed=DEFAULTS.seed, crop_margin=margin)
-            cfg = InsertionConfig(train_views=1, finetune=FinetuneConfig(steps=1, seed=DEFAULTS.seed))
+            harmonizer = restorer_harmonizer(restorer, replace(DEFAULTS.harmonize, steps=steps, samples=samples),
+                                             crop_margin=margin)
+            cfg = replace(DEFAULTS.insertion, train_views=1, finetune=replace(DEFAULTS.insertion.finetune, steps=1))
             rows = evaluate_insertion(scoped, gaussians, harmonizer=harmonizer, config=cfg, details=details,
                                       progress=False)
             row = next(r for r in rows if r["method"] == "harmonized")
@@ -218,7 +214,7 @@ def harmonize_settings(manifest, gaussians, restorer, budget: Budget) -> list[Se
                     "seconds": float(np.mean(details["timings"]["harmonize_seconds"])), "per": "frame"}
         return run
 
-    steps, samples = DEFAULTS.harmonize_steps, DEFAULTS.harmonize_samples
+    steps, samples = DEFAULTS.harmonize.steps, DEFAULTS.harmonize.samples
     return [*[Setting("harmonize steps", str(k), k == steps, measure(k, samples)) for k in dict.fromkeys((steps, 20, 50))],
             *[Setting("harmonize samples", str(k), k == samples, measure(steps, k)) for k in dict.fromkeys((1, samples, 8))],
             Setting("harmonize crop margin", "whole image", False, measure(steps, samples, None)),
@@ -310,10 +306,10 @@ WHY_DEFAULTS = {
     "alpha threshold": "1/255, the 3DGS value: a smaller contribution does not show in an 8-bit image.",
     "precision": "float32: float64 gives the same image to within 8-bit quantisation at twice the memory.",
     "resolution": "full: rendering small and upsampling blurs edges that the metric and the restorer see.",
-    "sampler steps": f"{DEFAULTS.sampler_steps} steps from step {DEFAULTS.n_start} (one Euler step from t = 0.2): the "
+    "sampler steps": f"{DEFAULTS.sampler.steps} steps from step {DEFAULTS.sampler.n_start} (one Euler step from t = 0.2): the "
                      "shipped small restorer's errors add up along the Euler path, so the fewest steps from a low "
                      "noise level measure best.",
-    "samples averaged": f"{DEFAULTS.samples}: the mean of samples estimates the posterior mean, which PSNR rewards; "
+    "samples averaged": f"{DEFAULTS.sampler.samples}: the mean of samples estimates the posterior mean, which PSNR rewards; "
                         "one sample (the paper's) keeps the small restorer's grain. Time grows less than linearly "
                         "(one batch).",
     "N_start of 50 steps, 1 sample": "the shipped small restorer keeps the render's structure best when it starts "
@@ -324,14 +320,14 @@ WHY_DEFAULTS = {
     "cast shadow": "on, at the scene's effects.shadow_ratio (0.4 when the scene gives none): a car "
                    "without its shadow floats; how dark shade is depends on the sky, so the table shows the "
                    "cost of a wrong ratio.",
-    "harmonize steps": f"{DEFAULTS.harmonize_steps}, started {DEFAULTS.harmonize_start:g} of the way down "
+    "harmonize steps": f"{DEFAULTS.harmonize.steps}, started {DEFAULTS.harmonize.start_fraction:g} of the way down "
                        "(t = 0.8: the vehicle needs a high noise level to change its lighting); the paper's 50 "
                        "steps measure worse with the shipped restorer, whose errors add up per step.",
-    "harmonize samples": f"{DEFAULTS.harmonize_samples}: the mean of harmonizations cancels most of the small "
+    "harmonize samples": f"{DEFAULTS.harmonize.samples}: the mean of harmonizations cancels most of the small "
                          "restorer's grain; 8 gains little more for twice the time.",
     "harmonize crop margin": f"{CROP_MARGIN} px of context around the region: from 16 to 64 px the masked PSNR "
                              "stays within 0.1 dB of the whole image's at a fraction of its time; 16 px is "
                              "faster still but leaves the network less of the scene around the vehicle.",
-    "fine-tune iterations": f"{DEFAULTS.finetune_steps}: past it the masked PSNR stops rising while time grows "
+    "fine-tune iterations": f"{DEFAULTS.insertion.finetune.steps}: past it the masked PSNR stops rising while time grows "
                             "linearly.",
 }

@@ -3,15 +3,18 @@
 Each area registers its own subcommands from a light module of this package (``cli/optim.py``,
 ``cli/diffusion.py``, ...; heavy imports happen inside the handlers, so ``symdrive plan`` never
 loads torch or a diffusion model). The library never imports this package; defaults live in the
-library (``diffusion/defaults.py``, the config dataclasses) and the options read them from there. Errors in the
-user's input print one line naming the file and field and exit with status 2.
+library's config dataclasses: flags default to None, fall back to the config (:func:`given`), and
+help texts print the config's value (:func:`default_of`). Errors in the user's input print one line
+naming the file and field and exit with status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import importlib
+import inspect
 import json
 import os
 import sys
@@ -218,6 +221,30 @@ def write_json(obj, target: str) -> None:
     from ..io.atomic import write_text_atomic
 
     write_text_atomic(target, json.dumps(obj, indent=1) + "\n")
+
+
+def default_of(owner, name: str) -> str:
+    """The default ``--help`` prints for ``name``: a field of a config dataclass (class or instance;
+    a dotted name walks into nested configs) or a keyword of a function, read from there so no help
+    text restates a number."""
+    value = owner
+    for part in name.split("."):
+        if isinstance(value, type) and dataclasses.is_dataclass(value):
+            f = next(f for f in dataclasses.fields(value) if f.name == part)
+            value = f.default_factory() if f.default is dataclasses.MISSING else f.default
+        elif callable(value) and not dataclasses.is_dataclass(value):
+            value = inspect.signature(value).parameters[part].default
+        else:
+            value = getattr(value, part)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def given(args: argparse.Namespace, *names: str, **renamed: str) -> dict:
+    """The options the command line set, as config fields: ``names`` are options named as their
+    field, ``renamed`` maps a field to its option's name. Left-out flags are None and are left out
+    here, so ``dataclasses.replace(config, **given(...))`` falls back to the config."""
+    pairs = [(n, n) for n in names] + list(renamed.items())
+    return {field: getattr(args, dest) for field, dest in pairs if getattr(args, dest) is not None}
 
 
 def add_quiet_option(p: argparse.ArgumentParser) -> None:

@@ -8,9 +8,19 @@ from __future__ import annotations
 
 import argparse
 import re
+from dataclasses import replace
 from pathlib import Path
 
-from ..diffusion.defaults import CYCLE_DEFAULTS, EVALUATED_METHODS, SAMPLER_DEFAULTS
+from ..diffusion.config import (
+    FLUX_PROMPT_TOKENS,
+    SAMPLERS,
+    CycleConfig,
+    FluxTrainConfig,
+    RefineConfig,
+    SamplerConfig,
+    TrainConfig,
+)
+from ..diffusion.defaults import EVALUATED_METHODS
 from ..pipeline.stages import StageOptions
 from . import (
     add_frames_option,
@@ -18,8 +28,10 @@ from . import (
     add_quiet_option,
     add_renamed_option,
     count_int,
+    default_of,
     device_arg,
     distances_arg,
+    given,
     positive_int,
 )
 
@@ -48,6 +60,18 @@ def _signed_offsets(text: str) -> list[float]:
     return values
 
 
+def _train_default(name: str) -> str:
+    """``default V`` of the built-in trainer's field ``name``, and Flux's where it has another."""
+    builtin = default_of(TrainConfig, name)
+    flux = default_of(FluxTrainConfig, name) if hasattr(FluxTrainConfig, name) else "None"
+    return f"default {builtin}" + ("" if flux in (builtin, "None") else f"; flux {flux}")
+
+
+def _per_backend(name: str) -> str:
+    """The sampler field ``name`` of each backend, as ``5 builtin, 50 flux``."""
+    return ", ".join(f"{default_of(sampler, name)} {backend}" for backend, sampler in SAMPLERS.items())
+
+
 def add_commands(sub) -> None:
     from . import add_external_assets_option
 
@@ -69,15 +93,11 @@ def add_commands(sub) -> None:
         help="lateral offsets (m, signed) of cycle reconstructions whose renders at the recorded "
         "cameras become degraded starts (default: none)",
     )
-    p.add_argument(
-        "--cycle-iters", type=positive_int, default=CYCLE_DEFAULTS[0], help="iterations of each cycle reconstruction"
-    )
-    p.add_argument(
-        "--cycle-max-gaussians",
-        type=int,
-        default=CYCLE_DEFAULTS[1],
-        help="densification cap of each cycle reconstruction",
-    )
+    p.add_argument("--cycle-iters", type=positive_int,
+                   help=f"iterations of each cycle reconstruction (default {default_of(CycleConfig, 'iters')})")
+    p.add_argument("--cycle-max-gaussians", type=int,
+                   help=f"densification cap of each cycle reconstruction "
+                        f"(default {default_of(CycleConfig, 'max_gaussians')})")
     p.add_argument("--warps", action="store_true",
                    help="also each frame's geometry-guided warp from the other frames (needs --cycle), "
                    "for training with --guide")
@@ -89,28 +109,28 @@ def add_commands(sub) -> None:
     p = sub.add_parser("train-restorer", help="train the built-in restorer on a pairs file (CPU)")
     p.add_argument("pairs", type=Path, help="pairs file from `symdrive make-pairs`")
     p.add_argument("--out", type=Path, required=True, help="folder for weights, record and checkpoint")
-    add_renamed_option(p, "--iters", "--steps", type=positive_int, help="training iterations (default 3000)")
+    add_renamed_option(p, "--iters", "--steps", type=positive_int,
+                       help=f"training iterations ({_train_default('steps')})")
+    paper = SamplerConfig()
     for flag, kind, text in (
-        ("--batch", positive_int, "crops per iteration (default 8)"),
-        ("--crop", positive_int, "square crop size in pixels (default 64)"),
-        ("--lr", float, "peak learning rate (default 4e-4)"),
-        ("--ema", float, "EMA decay of the shipped weights (default 0.999)"),
-        ("--width", positive_int, "UNet base width (default 24)"),
-        ("--seed", int, "seed of every batch and noise draw (default 0)"),
-        ("--threads", positive_int, "torch threads (default 1)"),
-        ("--checkpoint-every", positive_int, "iterations between checkpoints (default 250)"),
-        (
-            "--t-max",
-            float,
-            "train on noise levels t <= T_MAX (default 0.85; sampling from N_start 10 of 50 starts at 0.8)",
-        ),
-        ("--full-fraction", float, "share of each batch drawn on all of t in [0, 1] (default 0.1)"),
-        ("--output", str, "network output: skip (correction on the condition mean, default) or v"),
-        (
-            "--degraded-fraction",
-            float,
-            "share of each batch started from a degraded render, when the pairs have cycles (default 0.5)",
-        ),
+        ("--batch", positive_int, f"crops per iteration ({_train_default('batch')})"),
+        ("--crop", positive_int, f"square crop size in pixels ({_train_default('crop')})"),
+        ("--lr", float, f"peak learning rate ({_train_default('lr')})"),
+        ("--ema", float, f"EMA decay of the shipped weights (default {default_of(TrainConfig, 'ema')})"),
+        ("--width", positive_int, f"UNet base width (default {default_of(TrainConfig, 'width')})"),
+        ("--seed", int, f"seed of every batch and noise draw ({_train_default('seed')})"),
+        ("--threads", positive_int, f"torch threads ({_train_default('threads')})"),
+        ("--checkpoint-every", positive_int,
+         f"iterations between checkpoints ({_train_default('checkpoint_every')})"),
+        ("--t-max", float, f"train on noise levels t <= T_MAX (default {default_of(TrainConfig, 't_max')}; "
+                           f"sampling from N_start {paper.n_start} of {paper.steps} starts at "
+                           f"{1 - paper.n_start / paper.steps:g})"),
+        ("--full-fraction", float,
+         f"share of each batch drawn on all of t in [0, 1] (default {default_of(TrainConfig, 'full_fraction')})"),
+        ("--output", str, "network output: skip (correction on the condition mean) or v "
+                          f"(default {default_of(TrainConfig, 'output')})"),
+        ("--degraded-fraction", float, "share of each batch started from a degraded render, when the pairs have "
+                                       f"cycles ({_train_default('degraded_fraction')})"),
         ("--init", str, "restorer weights to continue from (default: a fresh network)"),
     ):
         p.add_argument(flag, type=kind, help=text)
@@ -125,12 +145,13 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-transformer", help="flux: FLUX.1-dev transformer folder (diffusers layout)")
     p.add_argument("--flux-vae", help="flux: FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--prompt", help="flux: prompt-embedding .safetensors from `symdrive flux-prompt`")
-    p.add_argument("--rank", type=positive_int, help="flux: LoRA rank (default 128, the paper's)")
+    p.add_argument("--rank", type=positive_int, help=f"flux: LoRA rank (default {default_of(FluxTrainConfig, 'rank')})")
     p.add_argument("--lora-alpha", type=float, help="flux: LoRA alpha (default: the rank)")
     p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
                    help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
-    p.add_argument("--grad-accum", type=positive_int, help="flux: batches accumulated per iteration (default 1)")
-    p.add_argument("--warmup", type=count_int, help="learning-rate warm-up iterations (default 100)")
+    p.add_argument("--grad-accum", type=positive_int, help="flux: batches accumulated per iteration "
+                   f"(default {default_of(FluxTrainConfig, 'grad_accum')})")
+    p.add_argument("--warmup", type=count_int, help=f"learning-rate warm-up iterations ({_train_default('warmup')})")
     p.add_argument("--mixed-precision", choices=["auto", "no", "bf16", "fp16"],
                    help="flux: auto (default) is bf16 on CUDA, float32 on the CPU")
     p.add_argument("--no-gradient-checkpointing", action="store_true", help="flux: keep all activations")
@@ -143,7 +164,7 @@ def add_commands(sub) -> None:
                         "as in FLUX.1-dev")
     p.add_argument("--out", type=Path, required=True, help=".safetensors to write")
     p.add_argument("--text", help="the prompt (default: diffusion.flux_prompt.DEFAULT_PROMPT)")
-    p.add_argument("--max-length", type=positive_int, default=512, help="T5 tokens (default 512, FLUX.1-dev's)")
+    p.add_argument("--max-length", type=positive_int, help=f"T5 tokens (default {FLUX_PROMPT_TOKENS}, FLUX.1-dev's)")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.set_defaults(func=_flux_prompt)
 
@@ -156,17 +177,18 @@ def add_commands(sub) -> None:
                        help="the views to restore (with --evaluate, the views --refine trains on; scoring "
                             "covers every offset with ground truth)")
     p.add_argument("--step", type=float, default=StageOptions.ar_step,
-                   help=f"chain step d in metres (0 = single-view; default {StageOptions.ar_step:g})")
+                   help=f"chain step d in metres (0 = single-view; default {default_of(StageOptions, 'ar_step')})")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
-    p.add_argument("--steps", type=positive_int, help="sampler steps (default: 5 builtin, 50 flux)")
-    p.add_argument("--n-start", type=count_int, help="start step of the noise initialisation (default: 4 builtin, 10 flux)")
-    p.add_argument("--seed", type=int, default=0, help="sampler noise seed (default 0)")
+    p.add_argument("--steps", type=positive_int, help=f"sampler steps (default: {_per_backend('steps')})")
+    p.add_argument("--n-start", type=count_int,
+                   help=f"start step of the noise initialisation (default: {_per_backend('n_start')})")
+    p.add_argument("--seed", type=int, help=f"sampler noise seed (default {default_of(SamplerConfig, 'seed')})")
     p.add_argument("--samples", type=positive_int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
-                        "times the work (default: 8 builtin, 1 flux)")
-    p.add_argument("--max-memory", type=float, default=StageOptions.max_memory_gib, metavar="GiB",
+                        f"times the work (default: {_per_backend('samples')})")
+    p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles "
-                        f"(default {StageOptions.max_memory_gib:g})")
+                        f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder: restored views and restored.json, or metrics.json with --evaluate")
     p.add_argument(
@@ -185,8 +207,8 @@ def add_commands(sub) -> None:
         action="store_true",
         help="with --evaluate: refine the 3DGS on the restored views, and (the control) on the recorded views alone",
     )
-    p.add_argument("--refine-iters", type=positive_int, default=StageOptions.refine_iters,
-                   help=f"refinement iterations of --refine (default {StageOptions.refine_iters})")
+    p.add_argument("--refine-iters", type=positive_int,
+                   help=f"refinement iterations of --refine (default {default_of(RefineConfig, 'iters')})")
     add_frames_option(p, "--refine-frames",
                       help="recorded frames whose restored lateral views --refine trains on (default: all)")
     p.add_argument("--backend", choices=["builtin", "flux"], default="builtin",
@@ -196,7 +218,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-vae", help="FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--flux-lora", help="restorer LoRA .safetensors")
     p.add_argument("--flux-prompt", help=".safetensors with prompt_embeds and pooled_prompt_embeds")
-    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default %(default)s)")
     add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_restore)
@@ -236,7 +258,7 @@ def _make_pairs(args) -> int:
         raise InputError("make-pairs", "needs --cycle: the cycle reconstructions' degraded starts fill what "
                          "no frame's warp sees", "--warps")
     manifest, ply = _reconstruction(args)
-    cycle = cycle_config(args.cycle_iters, args.cycle_max_gaussians)
+    cycle = cycle_config(CycleConfig(**given(args, iters="cycle_iters", max_gaussians="cycle_max_gaussians")))
     out = make_pairs(
         manifest, read_splats(ply, drop_invalid=True), args.offsets, args.out, frames=args.frames,
         cycle_offsets=args.cycle, cycle_config=cycle, warps=args.warps, drive=drive_identity(manifest, ply),
@@ -309,7 +331,8 @@ def _train_flux(args) -> int:
 def _flux_prompt(args) -> int:
     from ..diffusion.flux_prompt import DEFAULT_PROMPT, write_prompt_file
 
-    out = write_prompt_file(args.text_encoders, args.out, args.text or DEFAULT_PROMPT, args.max_length, args.device)
+    out = write_prompt_file(args.text_encoders, args.out, args.text or DEFAULT_PROMPT, device=args.device,
+                            **given(args, "max_length"))
     print(f"wrote {out}")
     return 0
 
@@ -320,12 +343,13 @@ def _restore(args) -> int:
     import torch
 
     from ..diffusion.models import load_restorer
-    from ..diffusion.sampler import SamplerConfig
     from ..errors import SymDriveError
     from ..io.atomic import write_text_atomic
 
-    steps, n_start, samples = SAMPLER_DEFAULTS[args.backend]
-    steps, n_start = args.steps or steps, n_start if args.n_start is None else args.n_start
+    # the backend's sampler with the pipeline's memory budget, then what the command line set
+    default = replace(SAMPLERS[args.backend], max_memory_gib=StageOptions().sampler.max_memory_gib)
+    sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", max_memory_gib="max_memory"))
+    steps, n_start = sampler.steps, sampler.n_start
     if n_start >= steps:
         raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "
                             f"below --steps {steps}: the sampler starts at step n_start of steps")
@@ -347,8 +371,6 @@ def _restore(args) -> int:
             else {}
         ),
     )
-    sampler = SamplerConfig(steps=steps, n_start=n_start,
-                            seed=args.seed, samples=args.samples or samples, max_memory_gib=args.max_memory)
     if args.evaluate:
         metrics = _evaluate(args, manifest, gaussians, restorer, sampler)
         write_text_atomic(args.out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
@@ -408,7 +430,8 @@ def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
     from ..eval.restoration import RefineStudy, restoration_study
     from ..io.ply import write_splats
 
-    refine = (RefineStudy(args.offsets, args.step, args.refine_frames, args.refine_iters, args.geometry_guided)
+    iters = replace(RefineConfig(), **given(args, iters="refine_iters")).iters
+    refine = (RefineStudy(args.offsets, args.step, args.refine_frames, iters, args.geometry_guided)
               if args.refine else None)
     metrics, refined = restoration_study(manifest, gaussians, restorer, methods=tuple(args.methods), sampler=sampler,
                                          frames=args.frames, refine=refine, progress=not args.quiet)

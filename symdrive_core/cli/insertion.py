@@ -5,7 +5,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import add_json_option, add_quiet_option, add_renamed_option, count_int, positive_int
+from ..insertion.config import MESH_SAMPLES, HarmonizeConfig
+from ..optim.config import FinetuneConfig
+from . import (
+    add_json_option,
+    add_quiet_option,
+    add_renamed_option,
+    count_int,
+    default_of,
+    given,
+    positive_int,
+)
 
 
 def add_commands(sub) -> None:
@@ -20,7 +30,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flip-forward", action="store_true", help="turn the asset half a turn (forward = -X assets)")
     p.add_argument("--from-mesh", action="store_true", help="sample the asset's mesh instead of its splat PLY")
     p.add_argument("--mesh-gaussians", type=positive_int, metavar="N",
-                   help="with --from-mesh: Gaussians sampled from the mesh (default 12000)")
+                   help=f"with --from-mesh: Gaussians sampled from the mesh (default {MESH_SAMPLES})")
     add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_insert)
@@ -30,12 +40,13 @@ def add_commands(sub) -> None:
     add_renamed_option(p, "--gaussians", "--background", type=Path, metavar="PLY", required=True,
                        help="reconstruction PLY")
     p.add_argument("--no-harmonize", action="store_true", help="baselines only (no diffusion model loaded)")
-    p.add_argument("--steps", type=positive_int, help="harmonization sampler steps (default 10)")
+    p.add_argument("--steps", type=positive_int,
+                   help=f"harmonization sampler steps (default {default_of(HarmonizeConfig, 'steps')})")
     add_renamed_option(p, "--samples", "--harmonize-samples", type=positive_int,
-                       help="harmonizations averaged per frame (default 4)")
+                       help=f"harmonizations averaged per frame (default {default_of(HarmonizeConfig, 'samples')})")
     p.add_argument("--weights", help="built-in restorer weights for harmonization (default: the shipped ones)")
     add_renamed_option(p, "--finetune-iters", "--finetune-steps", type=count_int,
-                       help="colour/opacity fine-tune iterations per vehicle (default 300)")
+                       help=f"colour/opacity fine-tune iterations per vehicle (default {default_of(FinetuneConfig, 'steps')})")
     p.add_argument("--features-module", help="feature extractor for the Frechet distance: FILE.py:FN, "
                    "MODULE:FN or a TorchScript .pt (never downloaded)")
     p.add_argument("--assets-out", help="write the fine-tuned assets (splat PLY) here")
@@ -51,19 +62,17 @@ def _insert(args) -> int:
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     out = Path(args.out) if args.out else manifest.output_dir() / "insert"
-    mesh = {} if args.mesh_gaussians is None else {"n_samples": args.mesh_gaussians}
     n = insert_actor(manifest, args.actor, out, background=args.gaussians, flip=args.flip_forward,
-                     from_mesh=args.from_mesh, progress=not args.quiet, **mesh)
+                     from_mesh=args.from_mesh, progress=not args.quiet, **given(args, n_samples="mesh_gaussians"))
     print(f"wrote {n} frame(s) of {args.actor} to {out}")
     return 0
 
 
 def _insert_eval(args) -> int:
     from ..eval.insertion import evaluate_insertion
+    from ..insertion.config import InsertionConfig
     from ..insertion.features import load_extractor
-    from ..insertion.insert import InsertionConfig
     from ..io.ply import read_splats
-    from ..optim.finetune import FinetuneConfig
     from ..scene import load_manifest
     from ..scene.ground_truth import require_truth
     from . import print_json, write_json
@@ -73,12 +82,11 @@ def _insert_eval(args) -> int:
     harmonizer = None
     if not args.no_harmonize:
         from ..diffusion.models import load_restorer
-        from ..insertion.harmonizer import DEFAULT_SAMPLES, restorer_harmonizer
+        from ..insertion.harmonizer import restorer_harmonizer
 
-        harmonizer = restorer_harmonizer(load_restorer(weights=args.weights), steps=args.steps,
-                                         samples=args.samples or DEFAULT_SAMPLES)
-    finetune = FinetuneConfig() if args.finetune_iters is None else FinetuneConfig(steps=args.finetune_iters)
-    cfg = InsertionConfig(finetune=finetune,
+        harmonizer = restorer_harmonizer(load_restorer(weights=args.weights),
+                                         HarmonizeConfig(**given(args, "steps", "samples")))
+    cfg = InsertionConfig(finetune=FinetuneConfig(**given(args, steps="finetune_iters")),
                           assets_out=Path(args.assets_out) if args.assets_out else None)
     details: dict = {}
     rows = evaluate_insertion(manifest, read_splats(args.gaussians, drop_invalid=True), harmonizer=harmonizer,

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
-from . import add_quiet_option, count_int, positive_int
+from ..optim.config import ReconstructConfig
+from . import add_quiet_option, count_int, default_of, given, positive_int
 
 
 def add_commands(sub) -> None:
@@ -12,14 +14,19 @@ def add_commands(sub) -> None:
 
     p = sub.add_parser("reconstruct", help="3DGS reconstruction of a scene package's background (CPU)")
     p.add_argument("package", help="scene package directory or its manifest.json")
-    p.add_argument("--iters", type=positive_int, default=None, help="training iterations (default 3000)")
+    p.add_argument("--iters", type=positive_int, help=f"training iterations (default {default_of(ReconstructConfig, 'iters')})")
     p.add_argument("--out", type=Path, default=None, help="output folder (default PACKAGE/reconstruction)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint if present")
-    p.add_argument("--sh-degree", type=count_int, default=None, help="SH degree of the result (default 1)")
-    p.add_argument("--depth-weight", type=float, default=None, help="inverse-depth L1 weight at the depth maps' measured pixels (default 0: off)")
-    p.add_argument("--max-gaussians", type=positive_int, default=None, help="cap for densification (default 200000)")
-    p.add_argument("--max-init-points", type=positive_int, default=None, help="point-cloud subset to start from (default 30000)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the reconstruction (default 0)")
+    p.add_argument("--sh-degree", type=count_int,
+                   help=f"SH degree of the result (default {default_of(ReconstructConfig, 'sh_degree')})")
+    p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
+                   f"0 = off (default {default_of(ReconstructConfig, 'depth_weight')})")
+    p.add_argument("--max-gaussians", type=positive_int,
+                   help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
+    p.add_argument("--max-init-points", type=positive_int, help="point-cloud subset to start from "
+                   f"(default {default_of(ReconstructConfig, 'max_init_points')})")
+    p.add_argument("--seed", type=int,
+                   help=f"random seed of the reconstruction (default {default_of(ReconstructConfig, 'seed')})")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats at the result")
@@ -31,16 +38,12 @@ def add_commands(sub) -> None:
 def _reconstruct(args) -> int:
     import json
 
-    from ..optim.reconstruct import ReconstructConfig, reconstruct
+    from ..optim.reconstruct import reconstruct
     from ..scene import ManifestError, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
-    cfg = ReconstructConfig(seed=args.seed)
-    for name in ("iters", "sh_degree", "depth_weight", "max_init_points"):
-        if getattr(args, name) is not None:
-            setattr(cfg, name, getattr(args, name))
-    if args.max_gaussians is not None:
-        cfg.densify.max_gaussians = args.max_gaussians
+    cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "depth_weight", "max_init_points", "seed"))
+    cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     if args.lateral:  # checked before hours of fitting, not after
         from ..scene.ground_truth import require_truth
 

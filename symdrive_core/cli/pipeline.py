@@ -7,8 +7,17 @@ import argparse
 import math
 
 from ..diffusion.adapt import AdaptConfig
+from ..pipeline.batch import run_batch
 from ..pipeline.stages import StageOptions
-from . import add_frames_option, add_json_option, add_offsets_option, add_quiet_option, positive_int
+from . import (
+    add_frames_option,
+    add_json_option,
+    add_offsets_option,
+    add_quiet_option,
+    default_of,
+    given,
+    positive_int,
+)
 
 
 def _seconds(text: str) -> float:
@@ -45,15 +54,15 @@ def add_commands(sub) -> None:
     p.add_argument("--no-adapt", action="store_true",
                    help="restore with the shipped restorer even on a drive its weights were not trained on")
     p.add_argument("--adapt-iters", type=positive_int,
-                   help=f"training iterations of the restorer's adaptation (default {AdaptConfig.iters})")
+                   help=f"training iterations of the restorer's adaptation (default {default_of(AdaptConfig, 'iters')})")
     p.add_argument("--adapt-seconds", type=_seconds, metavar="S",
                    help="time budget of the adaptation, its pairs included "
-                        f"(default {AdaptConfig.max_seconds:g})")
+                        f"(default {default_of(AdaptConfig, 'max_seconds')})")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on tiles "
-                        f"(default {StageOptions.max_memory_gib:g})")
+                        f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
     add_external_assets_option(p)
     p.set_defaults(func=_run)
 
@@ -63,7 +72,8 @@ def add_commands(sub) -> None:
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local: the scenes one after another in this process; ray: tasks on a Ray cluster")
     p.add_argument("--address", help="Ray cluster address (default: start a local one)")
-    p.add_argument("--frames-per-task", type=positive_int, default=4, help="frames rendered per Ray task (default 4)")
+    p.add_argument("--frames-per-task", type=positive_int,
+                   help=f"frames rendered per Ray task (default {default_of(run_batch, 'frames_per_task')})")
     p.add_argument("--device", default="cpu", type=device_arg, help="torch device (cpu, cuda, cuda:N)")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_quiet_option(p)
@@ -125,9 +135,9 @@ def _run(args) -> int:
     from ..pipeline.run import run_scene
     from ..pipeline.stages import StageOptions
 
-    stage_options = StageOptions() if args.max_memory is None else StageOptions(max_memory_gib=args.max_memory)
-    budget = {"iters": args.adapt_iters, "max_seconds": args.adapt_seconds}
-    stage_options.adapt = replace(stage_options.adapt, **{k: v for k, v in budget.items() if v is not None})
+    stage_options = StageOptions()
+    stage_options.sampler = replace(stage_options.sampler, **given(args, max_memory_gib="max_memory"))
+    stage_options.adapt = replace(stage_options.adapt, **given(args, iters="adapt_iters", max_seconds="adapt_seconds"))
     report = run_scene(args.package, args.out, options=_plan_options(args),
                        device=args.device, progress=not args.quiet, force=args.force,
                        allow_external=args.allow_external_assets, stage_options=stage_options)
@@ -138,10 +148,8 @@ def _run(args) -> int:
 
 
 def _batch(args) -> int:
-    from ..pipeline.batch import run_batch
-
     reports = run_batch(args.packages, args.out, executor=args.executor, ray_address=args.address,
-                        frames_per_task=args.frames_per_task, device=args.device, force=args.force,
+                        device=args.device, force=args.force, **given(args, "frames_per_task"),
                         progress=not args.quiet,
                         allow_external=args.allow_external_assets)
     for r in reports:

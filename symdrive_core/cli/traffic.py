@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from . import add_quiet_option, positive_int
+from ..scene.road import road_from_spec
+from ..traffic.simulate import TrafficOptions
+from . import add_quiet_option, default_of, given, positive_int
 
 
 def add_commands(sub) -> None:
@@ -14,15 +16,19 @@ def add_commands(sub) -> None:
     p.add_argument("--density", type=float, required=True, help="vehicles per km per lane (0 = no traffic)")
     p.add_argument("--seconds", type=float, required=True,
                    help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the demand and of SUMO (default 0)")
-    p.add_argument("--speed", type=float, default=None, help="speed limit in m/s (default 13.89; 0 = standing)")
+    p.add_argument("--seed", type=int,
+                   help=f"random seed of the demand and of SUMO (default {default_of(TrafficOptions, 'seed')})")
+    p.add_argument("--speed", type=float,
+                   help=f"speed limit in m/s, 0 = standing (default {default_of(TrafficOptions, 'speed')})")
     p.add_argument("--manoeuvre", help="manoeuvre spec JSON (cut_in, lane_change, hard_brake), run through TraCI")
     p.add_argument("--assets", nargs="+", help="vehicle asset folders (with wlh.json) or folders holding them; "
                                                "default: the asset folders inside the package")
     p.add_argument("--out", help="output package directory (default: PACKAGE-traffic beside the package)")
     p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
-    p.add_argument("--lanes", type=positive_int, default=2, help="lanes of a --road road (default 2)")
-    p.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit for SUMO in seconds")
+    p.add_argument("--lanes", type=positive_int,
+                   help=f"lanes of a --road road (default {default_of(road_from_spec, 'lanes')})")
+    p.add_argument("--timeout", type=float,
+                   help=f"wall-clock limit for SUMO in seconds (default {default_of(TrafficOptions, 'timeout')})")
     add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_traffic)
@@ -34,15 +40,15 @@ def _traffic(args) -> int:
 
     from ..errors import InputError
     from ..scene import load_manifest
-    from ..scene.road import road_from_json, road_from_spec
+    from ..scene.road import road_from_json
     from ..traffic.assets import asset_pool
     from ..traffic.manoeuvre_spec import load_manoeuvres
     from ..traffic.package import check_output_path, traffic_manifest, write_package
-    from ..traffic.simulate import DEFAULT_SPEED, TrafficOptions, simulate
+    from ..traffic.simulate import simulate
 
     src = load_manifest(args.package, allow_external=args.allow_external_assets)
     if args.road:
-        road = road_from_spec(args.road, lanes=args.lanes)
+        road = road_from_spec(args.road, **given(args, "lanes"))
     elif "road" in src.ground_truth:
         road = road_from_json(src.ground_truth["road"], src.path)
     else:
@@ -51,10 +57,9 @@ def _traffic(args) -> int:
     out = Path(args.out) if args.out else src.root.parent / f"{src.root.name}-traffic"
     check_output_path(src, out)
     assets = asset_pool([Path(a) for a in args.assets] if args.assets else [src.root])
-    opt = TrafficOptions(density=args.density, seconds=args.seconds, seed=args.seed,
-                         speed=DEFAULT_SPEED if args.speed is None else args.speed,
+    opt = TrafficOptions(density=args.density, seconds=args.seconds,
                          manoeuvres=load_manoeuvres(args.manoeuvre) if args.manoeuvre else [],
-                         timeout=args.timeout)
+                         **given(args, "seed", "speed", "timeout"))
     with tempfile.TemporaryDirectory(prefix="symdrive-traffic-") as tmp:
         run = simulate(road, [f.timestamp for f in src.frames], assets, opt, Path(tmp), where=str(src.path),
                        progress=not args.quiet)

@@ -8,7 +8,8 @@ tiles under a memory budget), ``data`` (training pairs), ``cycle`` (degraded sta
 reconstructions), ``warp`` (recorded neighbours warped over the ground: the guided chain's
 geometry), ``train``, ``adapt`` (the restorer fine-tuned on the drive it restores),
 ``restore`` (auto-regressive lateral chain, evaluation), ``refine`` (3DGS
-refinement on restored views), ``harmonize`` (RePaint), ``defaults`` (the defaults callers
+refinement on restored views), ``harmonize`` (RePaint), ``config`` (the torch-free config
+dataclasses: sampler per backend, training, refinement, cycles), ``defaults`` (names callers
 outside read without torch; the command line is ``cli/diffusion.py``).
 
 Design of the built-in backend, which must train on a CPU in minutes and ship in a few MB:

@@ -89,6 +89,7 @@ def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: Ad
     import time
 
     from ..scene.ground_truth import truth_camera
+    from .config import CycleConfig
     from .cycle import cycle_config
     from .data import make_pairs
     from .train import RECORD, WEIGHTS, TrainConfig, train_restorer
@@ -99,7 +100,8 @@ def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: Ad
     t0 = time.perf_counter()
     if not (out / PAIRS).exists():
         make_pairs(manifest, gaussians, config.offsets, out / PAIRS, camera=truth_camera(manifest).name,
-                   cycle_offsets=config.cycle_offsets, cycle_config=cycle_config(config.cycle_iters),
+                   cycle_offsets=config.cycle_offsets,
+                   cycle_config=cycle_config(CycleConfig(iters=config.cycle_iters)),
                    warps=guided, drive=drive, progress=progress)
     left = None if config.max_seconds is None else max(config.max_seconds - (time.perf_counter() - t0), 0.0)
     cfg = TrainConfig(steps=config.iters, lr=config.lr, warmup=config.warmup, seed=config.seed,

@@ -21,12 +21,12 @@ from ..optim.densify import DensifyConfig
 from ..optim.reconstruct import ReconstructConfig, View, fit, initial_gaussians, load_views
 from ..scene import Manifest
 from ..splat.render import SplatRenderer
-from .defaults import CYCLE_DEFAULTS
+from .config import CycleConfig
 
 
-def cycle_config(iters: int = CYCLE_DEFAULTS[0], max_gaussians: int = CYCLE_DEFAULTS[1]) -> ReconstructConfig:
+def cycle_config(budget: CycleConfig = CycleConfig()) -> ReconstructConfig:
     """The reconstruction recipe with a cycle's budget (shorter than a full reconstruction)."""
-    return ReconstructConfig(iters=iters, densify=DensifyConfig(max_gaussians=max_gaussians))
+    return ReconstructConfig(iters=budget.iters, densify=DensifyConfig(max_gaussians=budget.max_gaussians))
 
 
 def shifted_views(views: list[View], render: SplatRenderer, offset_m: float) -> list[View]:

@@ -23,10 +23,10 @@ import torch
 
 from ..errors import InputError
 from ..io.atomic import atomic_path
+from .config import LORA_TARGETS
 from .latent import VAESpace
 
 VIEW_CENTRE, VIEW_LEFT, VIEW_RIGHT = 0, 1, 2
-LORA_TARGETS = ("to_q", "to_k", "to_v", "to_out.0")
 
 
 def pack(z: torch.Tensor) -> torch.Tensor:

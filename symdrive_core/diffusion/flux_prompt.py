@@ -20,6 +20,7 @@ import torch
 
 from ..errors import InputError
 from ..io.atomic import atomic_path
+from .config import FLUX_PROMPT_TOKENS
 
 DEFAULT_PROMPT = "a sharp, clean photo of a street seen from a car, road, lane markings, cars, buildings"
 SUBFOLDERS = {"clip": "text_encoder", "clip_tokenizer": "tokenizer", "t5": "text_encoder_2", "t5_tokenizer": "tokenizer_2"}
@@ -37,7 +38,8 @@ def _check(root: Path) -> dict[str, Path]:
 
 
 @torch.no_grad()
-def prompt_embeddings(text_encoders, text: str = DEFAULT_PROMPT, max_length: int = 512, device: str = "cpu"):
+def prompt_embeddings(text_encoders, text: str = DEFAULT_PROMPT, max_length: int = FLUX_PROMPT_TOKENS,
+                      device: str = "cpu"):
     """``(prompt_embeds [L, D_t5], pooled_prompt_embeds [D_clip])`` in float32."""
     from transformers import AutoTokenizer, CLIPTextModel, T5EncoderModel
 
@@ -57,7 +59,8 @@ def prompt_embeddings(text_encoders, text: str = DEFAULT_PROMPT, max_length: int
     return embeds, pooled
 
 
-def write_prompt_file(text_encoders, out, text: str = DEFAULT_PROMPT, max_length: int = 512, device: str = "cpu") -> Path:
+def write_prompt_file(text_encoders, out, text: str = DEFAULT_PROMPT, max_length: int = FLUX_PROMPT_TOKENS,
+                      device: str = "cpu") -> Path:
     """The ``.safetensors`` :func:`.flux.load_flux` reads (``prompt_embeds``, ``pooled_prompt_embeds``)."""
     from safetensors.torch import save_file
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import torch
@@ -30,40 +30,13 @@ import torch
 from ..errors import InputError
 from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
-from .flux import LORA_TARGETS, FluxRestorer, add_lora, save_lora
+from .config import FluxTrainConfig
+from .flux import FluxRestorer, add_lora, save_lora
 from .train import load_optimizer_tensors, optimizer_tensors
 
 CHECKPOINT = "flux_checkpoint.safetensors"
 LORA = "restorer_lora.safetensors"
 RECORD = "flux_lora.json"
-
-
-@dataclass
-class FluxTrainConfig:
-    steps: int = 20000  # the paper's
-    batch: int = 1  # pairs per step and process
-    crop: int = 512  # square crop in pixels (clipped to the image; trimmed to whole 2x2 latent patches)
-    lr: float = 1e-4
-    warmup: int = 100
-    rank: int = 128  # the paper's
-    alpha: float | None = None  # LoRA scale numerator (default: the rank, i.e. scale 1)
-    targets: tuple[str, ...] = LORA_TARGETS
-    seed: int = 0
-    checkpoint_every: int = 500
-    grad_accum: int = 1
-    max_grad_norm: float = 1.0
-    gradient_checkpointing: bool = True
-    mixed_precision: str = "auto"  # "auto": bf16 on CUDA, none (float32) on the CPU; or "no" / "bf16" / "fp16"
-    guidance: float = 3.5  # Flux.1-dev's distilled guidance input, as sampling uses it
-    t_max: float = 1.0  # noise levels before the shift: uniform on [0, t_max]
-    degraded_fraction: float = 0.5  # share started from a degraded render when the pairs have them
-    start_t_min: float = 0.1
-    # The same batch and noise at every step (an overfitting check, not for real training).
-    fixed_batch: bool = False
-    threads: int | None = None  # torch CPU threads (default: torch's)
-
-    def lora_meta(self) -> dict:
-        return {"rank": self.rank, "alpha": self.alpha or self.rank, "targets": list(self.targets)}
 
 
 def learning_rate(cfg: FluxTrainConfig, step: int) -> float:

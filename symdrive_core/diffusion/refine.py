@@ -12,23 +12,14 @@ the recorded views does not drift toward hallucinated detail.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from ..gaussians import Gaussians
 from ..scene import Manifest
+from .config import RefineConfig
 from .restore import RestoredView
-
-
-@dataclass
-class RefineConfig:
-    iters: int = 600
-    ssim_lambda: float = 0.2
-    depth_weight: float = 0.1
-    novel_weight: float = 1.0
-    seed: int = 0
 
 
 def refine_gaussians(

@@ -7,33 +7,11 @@ sampler from step ``n_start`` and decodes. Images are [B, 3, H, W] tensors in [0
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 
 from . import flow
-
-
-@dataclass(frozen=True)
-class SamplerConfig:
-    steps: int = 50
-    n_start: int = 10  # the paper's position-accurate start (0 = from pure noise)
-    seed: int = 0
-    # Average of this many independent samples (one batch): an estimate of the posterior mean,
-    # which is what PSNR rewards, at up to this many times the cost. 1 is the paper's single sample.
-    samples: int = 1
-    # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
-    # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
-    max_memory_gib: float | None = None
-    tile: int = 256
-    tile_overlap: int = 32
-
-    def tiling(self):
-        from .tiling import TileOptions
-
-        return TileOptions(max_memory_gib=self.max_memory_gib, tile=self.tile, overlap=self.tile_overlap)
-
+from .config import SamplerConfig
 
 DEFAULT = SamplerConfig()
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import torch
@@ -34,45 +34,14 @@ import torch
 from ..errors import InputError
 from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
+from .config import GUIDE_CHANNELS, TrainConfig
 from .data import PairSet, file_sha256
 from .models import BuiltinRestorer, load_builtin, save_builtin
-from .unet import GUIDE_CHANNELS, UNet, UNetConfig, with_guide
+from .unet import UNet, with_guide
 
 CHECKPOINT = "checkpoint.safetensors"
 WEIGHTS = "restorer.safetensors"
 RECORD = "restorer.json"
-
-
-@dataclass
-class TrainConfig:
-    steps: int = 3000
-    batch: int = 8
-    crop: int = 64
-    lr: float = 4e-4
-    warmup: int = 100
-    ema: float = 0.999
-    seed: int = 0
-    checkpoint_every: int = 250
-    threads: int = 1  # 2+ threads on a shared 2-core machine ran 20x slower (oversubscription)
-    width: int = UNetConfig.width
-    mults: tuple[int, ...] = UNetConfig.mults
-    output: str = UNetConfig.output  # "skip" (correction on the condition mean) or "v"
-    # noise levels trained on: uniform on [0, t_max] plus a full_fraction share on [0, 1].
-    # The default sampler (50 steps, N_start 10, no shift) starts at t = 0.8.
-    t_max: float = 0.85
-    full_fraction: float = 0.1
-    # share of samples whose noisy state starts from a degraded render (pairs files with cycles)
-    degraded_fraction: float = 0.5
-    start_t_min: float = 0.1  # their lowest noise level (see flow.flow_loss)
-    init: str | None = None  # restorer weights to start from (default: a fresh network)
-    guide: bool = False  # the warp and its mask as a condition (pairs with warps)
-    # stop after this many seconds of training even if fewer than ``steps`` ran (None: no limit);
-    # the learning-rate schedule still spans ``steps``, and the EMA so far is what ships
-    max_seconds: float | None = None
-
-    def unet(self) -> UNetConfig:
-        return UNetConfig(width=self.width, mults=tuple(self.mults), output=self.output,
-                          guide_channels=GUIDE_CHANNELS if self.guide else 0)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:

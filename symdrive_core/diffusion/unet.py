@@ -12,39 +12,13 @@ of a 0.5-1 m lateral step at this resolution.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import replace
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-
-@dataclass(frozen=True)
-class UNetConfig:
-    width: int = 24
-    mults: tuple[int, ...] = (1, 2, 4, 4)
-    image_channels: int = 3  # per view; the input holds three views
-    groups: int = 8
-    # "skip": the output is a correction on top of a precision-weighted blend of the noisy
-    # state and the mean of the two conditions (see ``UNet.forward``); "v": the raw velocity.
-    output: str = "skip"
-    # prior spread of the centre view around the condition mean, [-1, 1] units. The measured
-    # RMS error of the mean on the demo pairs is 0.18-0.30, but a smaller value keeps what the
-    # network has not learned from turning into per-pixel sampling noise (the ODE reproduces
-    # the prior spread exactly), so an undertrained model stays close to the mean.
-    cond_sigma: float = 0.1
-    data_sigma: float = 0.4  # RMS of images in [-1, 1] units (input scaling of z_t)
-    # extra input channels after the three views: 4 for the geometry-guided warp of the target
-    # camera and its validity mask (see ``with_guide``); 0 for the unguided network
-    guide_channels: int = 0
-
-    def to_json(self) -> dict:
-        return {**asdict(self), "mults": list(self.mults)}
-
-    @classmethod
-    def from_json(cls, d: dict) -> UNetConfig:
-        d = {"output": "v", **d}  # checkpoints written before "output" existed predict v
-        return cls(**{**d, "mults": tuple(d["mults"])})
+from .config import GUIDE_CHANNELS, UNetConfig
 
 
 def time_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
@@ -173,9 +147,6 @@ class UNet(nn.Module):
         s2 = self.config.cond_sigma**2
         tb = t.clamp(1e-4, 1.0)
         return ((1 - tb) ** 2 * s2 + tb**2) / s2
-
-
-GUIDE_CHANNELS = 4  # the warp (3) and its validity mask (1)
 
 
 def with_guide(net: UNet, channels: int = GUIDE_CHANNELS) -> UNet:

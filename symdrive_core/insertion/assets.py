@@ -17,6 +17,7 @@ from ..gaussians import Gaussians
 from ..io.mesh import read_mesh
 from ..io.ply import read_splats
 from ..traffic.assets import load_asset
+from .config import MESH_SAMPLES
 from .mesh_to_splats import mesh_to_splats
 
 # Half turn about Z: (x, y, z) -> (-x, -y, z); quaternion (w, x, y, z) = (0, 0, 0, 1).
@@ -50,7 +51,7 @@ def flip_forward(g: Gaussians) -> Gaussians:
                      g.log_scales.copy(), g.opacity_logits.copy(), sh.astype(np.float32), normals, dict(g.extra))
 
 
-def load_vehicle_asset(folder, *, flip: bool = False, from_mesh: bool = False, n_samples: int = 12000,
+def load_vehicle_asset(folder, *, flip: bool = False, from_mesh: bool = False, n_samples: int = MESH_SAMPLES,
                        seed: int = 0) -> VehicleAsset:
     """Gaussians of an asset folder: its splat PLY, or its mesh sampled when there is none
     (or when ``from_mesh``)."""
@@ -67,7 +68,7 @@ def load_vehicle_asset(folder, *, flip: bool = False, from_mesh: bool = False, n
     return VehicleAsset(folder.name, flip_forward(g) if flip else g, info.wlh, Path(source))
 
 
-def actor_gaussians(manifest, actor, *, flip: bool = False, from_mesh: bool = False, n_samples: int = 12000,
+def actor_gaussians(manifest, actor, *, flip: bool = False, from_mesh: bool = False, n_samples: int = MESH_SAMPLES,
                     seed: int = 0) -> Gaussians:
     """An actor's Gaussians in its vehicle frame, from the files its manifest entry names."""
     if from_mesh or actor.splats is None:

@@ -8,19 +8,19 @@ change is the vehicle plus that shadow. :mod:`.evaluate` scores what this produc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..gaussians import Gaussians
 from ..metrics import bbox_crop
-from ..optim.finetune import FinetuneConfig, FinetuneSample
+from ..optim.finetune import FinetuneSample
 from ..scene import Manifest, Pose
 from ..scene.camera import CameraView
 from ..splat.frozen_view import FrozenView
 from ..splat.tensors import GaussianTensors
 from .cast_shadow import CastShadow, vehicle_shadow
+from .config import InsertionConfig
 from .place import place
 from .shadow import dilate, harmonization_region, shadow_region
 
@@ -35,16 +35,6 @@ def render_insertion(camera: CameraView, background: GaussianTensors | None, veh
                      *, background_color=(0.0, 0.0, 0.0)):
     """Naive insertion of one vehicle: (rgb [H,W,3], vehicle alpha [H,W]) as numpy."""
     return insertion_view(camera, background, vehicle, pose, background_color=background_color).render_numpy(vehicle)
-
-
-@dataclass
-class InsertionConfig:
-    train_views: int = 6
-    crop_margin: int = 6  # pixels around the harmonized region kept for the fine-tune
-    loss_ring_px: int = 2  # the fine-tune looks at the vehicle plus this ring (keeps opacity honest)
-    shadow_dilate_px: int = 3
-    finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
-    assets_out: Path | None = None  # write each fine-tuned asset here as a splat PLY
 
 
 @dataclass

@@ -20,6 +20,7 @@ import numpy as np
 from ..conventions import linear_to_srgb, srgb_to_linear
 from ..gaussians import Gaussians
 from ..io.mesh import DEFAULT_COLOR, TriMesh
+from .config import MESH_SAMPLES
 from .surface import sample_surface, surface_splats, surfel_spacing, triangle_areas
 
 
@@ -85,7 +86,7 @@ def _multiplied_color(mesh: TriMesh, info: dict, bary: np.ndarray, tri: np.ndarr
     return linear_to_srgb(lin)
 
 
-def mesh_to_splats(mesh: TriMesh, n: int = 12000, *, seed: int = 0, flatness: float = 0.1,
+def mesh_to_splats(mesh: TriMesh, n: int = MESH_SAMPLES, *, seed: int = 0, flatness: float = 0.1,
                    spacing_factor: float = 1.2, opacity: float = 0.95) -> Gaussians:
     """``n`` flat Gaussians covering the mesh surface, degree-0 SH from the surface colour."""
     if n <= 0:

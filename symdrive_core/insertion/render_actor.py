@@ -20,11 +20,12 @@ from ..io.ply import read_splats
 from ..scene import Manifest, box_corners_world, box_in_frustum, vehicle_local_box
 from ..scene.camera import CameraView
 from .assets import actor_gaussians
+from .config import MESH_SAMPLES
 from .insert import insert_frame
 
 
 def insert_actor(manifest: Manifest, actor_id: str, out, *, background=None, flip: bool = False,
-                 from_mesh: bool = False, n_samples: int = 12000, progress: bool = True) -> int:
+                 from_mesh: bool = False, n_samples: int = MESH_SAMPLES, progress: bool = True) -> int:
     """Write every visible frame of ``actor_id`` inserted into the background; returns the count."""
     from ..splat.tensors import GaussianTensors
 

@@ -9,22 +9,12 @@ from the parent (over-reconstruction). Nearly transparent and oversized Gaussian
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 
 from ..splat.projection import normalize_quats, quat_to_rotmat
+from .config import DensifyConfig
 
 SPLIT_SHRINK = 1.6
-
-
-@dataclass
-class DensifyConfig:
-    grad_threshold: float = 0.0002  # mean NDC gradient norm above which a Gaussian densifies
-    dense_fraction: float = 0.01  # clone below this size (fraction of the scene extent), split above
-    min_opacity: float = 0.005
-    max_angular_size: float = 0.25  # prune when the largest axis exceeds this fraction of its distance
-    max_gaussians: int = 200_000
 
 
 class GradStats:

@@ -18,17 +18,8 @@ from tqdm import tqdm
 
 from ..gaussians import Gaussians
 from ..splat.frozen_view import FrozenView
+from .config import FinetuneConfig
 from .losses import photometric
-
-
-@dataclass
-class FinetuneConfig:
-    steps: int = 300
-    lr_sh0: float = 5e-3  # DC term
-    lr_shN: float = 5e-3 / 20  # higher-order terms, as 3DGS does
-    lr_opacity: float = 2.5e-2
-    ssim_lambda: float = 0.2
-    seed: int = 0
 
 
 @dataclass

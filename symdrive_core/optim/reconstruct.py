@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,36 +31,11 @@ from ..scene.camera import CameraView
 from ..scene.depth import is_sky, measured, read_depth
 from ..scene.ground_truth import split_frames
 from ..splat.render import params_from_gaussians, render_params
-from .densify import DensifyConfig, GradStats, densify_and_prune, ndc_gradient_norm
+from .config import ReconstructConfig
+from .densify import GradStats, densify_and_prune, ndc_gradient_norm
 from .losses import photometric
 
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
-
-
-@dataclass
-class ReconstructConfig:
-    iters: int = 3000
-    sh_degree: int = 1
-    sh_every: int = 1000  # raise the active SH degree every this many iterations
-    lr_means: float = 1.6e-4  # times the scene extent; decays exponentially to lr_means_final
-    lr_means_final: float = 1.6e-6
-    lr_sh0: float = 2.5e-3
-    lr_shN: float = 2.5e-3 / 20
-    lr_opacity: float = 5e-2
-    lr_scales: float = 5e-3
-    lr_quats: float = 1e-3
-    ssim_lambda: float = 0.2
-    depth_weight: float = 0.0  # inverse-depth L1 at the depth maps' measured pixels (0 = off)
-    init_opacity: float = 0.3
-    sky_points: int = 4000
-    max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
-    densify_from: int = 300
-    densify_until_fraction: float = 0.6
-    densify_every: int = 100
-    densify: DensifyConfig = field(default_factory=DensifyConfig)
-    holdout_every: int = 5  # used when the package does not name its held-out frames
-    checkpoint_every: int = 500
-    seed: int = 0
 
 
 @dataclass

@@ -12,6 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..diffusion.config import RefineConfig
+from ..insertion.config import InsertionConfig
+from ..optim.config import FinetuneConfig
 from .lock import OutputLock
 from .outputs import OutputTree
 from .plan import PlanOptions
@@ -21,8 +24,9 @@ DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
 # The demo's window: frames with lateral truth, and in the quick run the right side at 1 and 3 m.
 QUICK = (PlanOptions(refine=False, frames=[12], offsets=(1.0, 3.0)),
-         StageOptions(eval_methods=("single_view", "ar_d0.5"), finetune_steps=80, insertion_train_views=2))
-FULL = (PlanOptions(frames=[2, 12, 22]), StageOptions(refine_iters=300))
+         StageOptions(eval_methods=("single_view", "ar_d0.5"),
+                      insertion=InsertionConfig(train_views=2, finetune=FinetuneConfig(steps=80))))
+FULL = (PlanOptions(frames=[2, 12, 22]), StageOptions(refine=RefineConfig(iters=300)))
 
 
 def road_trajectory(manifest, height_m: float, start_m: float = 8.0, speed_mps: float | None = None,

@@ -20,6 +20,7 @@ from tqdm import tqdm
 from .. import conventions
 from ..errors import InputError
 from ..gaussians import Gaussians
+from ..insertion.config import MESH_SAMPLES
 from ..io.images import write_image, write_mask
 from ..io.ply import read_splats
 from ..scene import Manifest
@@ -27,7 +28,6 @@ from ..scene.camera import CameraView
 from .outputs import ASSET_CACHE, OutputTree
 from .plan import Plan
 
-MESH_SAMPLES = 12000  # splats per mesh-only actor, as insertion.assets samples a mesh asset
 MESH_SEED = 0
 MESH_CONVERSION = "mesh_to_splats/1"  # part of the cache key: change it when the conversion changes
 

@@ -8,17 +8,15 @@ A new stage is a function here registered with :func:`stage` and its decision in
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from ..diffusion.adapt import AdaptConfig
-from ..diffusion.defaults import SAMPLER_DEFAULTS
-from ..insertion.harmonizer import DEFAULT_SAMPLES as HARMONIZE_SAMPLES
-from ..insertion.harmonizer import DEFAULT_START_FRACTION as HARMONIZE_START
-from ..insertion.harmonizer import DEFAULT_STEPS as HARMONIZE_STEPS
+from ..diffusion.config import SAMPLERS, RefineConfig, SamplerConfig
+from ..insertion.config import HarmonizeConfig, InsertionConfig
 from ..scene.ground_truth import has_insertion_truth, has_lateral_truth
 
 
@@ -32,23 +30,14 @@ class StageOptions:
     # chain at every offset on the demo's held-out lateral views (docs/results.md); a camera whose package
     # gives the warp no ground or no depth falls back to the unguided chain.
     geometry_guided: bool = True
-    # The paper runs Flux 50 steps from step 10 (t = 0.8), one sample. The shipped small restorer
-    # measures best with one step from t = 0.2, averaged over 8 samples (`symdrive bench
-    # accuracy-time`): its errors add up per step, and the mean of samples cancels their grain.
-    sampler_steps: int = SAMPLER_DEFAULTS["builtin"][0]
-    n_start: int = SAMPLER_DEFAULTS["builtin"][1]
-    samples: int = SAMPLER_DEFAULTS["builtin"][2]
     eval_methods: tuple[str, ...] = ("single_view", "ar_d0.5", "ar_d1.0")
-    refine_iters: int = 900
-    harmonize_steps: int = HARMONIZE_STEPS  # the paper's 50 measure worse with the shipped restorer
-    harmonize_start: float = HARMONIZE_START  # start this fraction of the way down, from the noised render
-    harmonize_samples: int = HARMONIZE_SAMPLES
-    finetune_steps: int = 300
-    insertion_train_views: int = 6
-    seed: int = 0
-    # GiB one restorer evaluation may use; beyond it samples, then overlapping tiles, run in turn
-    # (diffusion.tiling). Fixed, not read from the machine, so the run's cache key stays put.
-    max_memory_gib: float | None = 4.0
+    # The built-in restorer's measured sampler. Its memory budget (GiB one restorer evaluation
+    # may use, harmonization's too; beyond it samples, then overlapping tiles, run in turn:
+    # diffusion.tiling) is fixed, not read from the machine, so the run's cache key stays put.
+    sampler: SamplerConfig = field(default_factory=lambda: replace(SAMPLERS["builtin"], max_memory_gib=4.0))
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    harmonize: HarmonizeConfig = field(default_factory=HarmonizeConfig)
+    insertion: InsertionConfig = field(default_factory=InsertionConfig)  # its training views and fine-tune
     adapt: AdaptConfig = field(default_factory=AdaptConfig)  # the restorer's fine-tune on this drive
 
 
@@ -154,13 +143,6 @@ def adapted_folder(ctx) -> Path:
     return ctx.shared.adapted
 
 
-def _sampler(opts: StageOptions):
-    from ..diffusion.sampler import SamplerConfig
-
-    return SamplerConfig(steps=opts.sampler_steps, n_start=opts.n_start, seed=opts.seed, samples=opts.samples,
-                         max_memory_gib=opts.max_memory_gib)
-
-
 @stage("reconstruct")
 def reconstruct_stage(ctx) -> StageResult:
     """Fit background Gaussians to the package's images (it had none); later stages read them
@@ -225,7 +207,7 @@ def restore_stage(ctx) -> StageResult:
     from ..splat.render import SplatRenderer
 
     m, opts, decision = ctx.manifest, ctx.options, ctx.plan.stage("restore")
-    g, model, sampler = background(ctx), restorer(ctx), _sampler(opts)
+    g, model, sampler = background(ctx), restorer(ctx), opts.sampler
     render = SplatRenderer(g)  # one parameter conversion for scoring, chains and the remaining views
     plain = f"ar_d{opts.ar_step:g}" if opts.ar_step > 0 else "single_view"
     warpers: dict = {}  # by camera name: the geometry-guided chain's warper, None where it has none
@@ -277,7 +259,7 @@ def restore_stage(ctx) -> StageResult:
 def refine_stage(ctx) -> StageResult:
     """Fine-tune the background on the recorded views plus the restored lateral views. A refined
     PLY already in the folder (a run that stopped after refining) is reused, not refitted."""
-    from ..diffusion.refine import RefineConfig, refine_gaussians
+    from ..diffusion.refine import refine_gaussians
     from ..eval.views import evaluate_lateral
     from ..io.ply import read_splats, write_splats
 
@@ -286,8 +268,7 @@ def refine_stage(ctx) -> StageResult:
         refined, details = read_splats(path), {"reused": True}
     else:
         refined, stats = refine_gaussians(ctx.manifest, background(ctx), ctx.shared.restored,
-                                          RefineConfig(iters=ctx.options.refine_iters, seed=ctx.options.seed),
-                                          progress=ctx.progress)
+                                          ctx.options.refine, progress=ctx.progress)
         write_splats(path, refined)
         # The loop's own time is part of the stage's row "seconds".
         details = {k: v for k, v in stats.items() if isinstance(v, (int, float)) and k not in ("seconds", "iters")}
@@ -296,7 +277,7 @@ def refine_stage(ctx) -> StageResult:
     if ctx.plan.runs("evaluate") and has_lateral_truth(ctx.manifest):
         metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.plan.window)
                               if round(r["offset_m"], 6) in offsets]
-    return StageResult({"iterations": ctx.options.refine_iters, **details}, metrics)
+    return StageResult({"iterations": ctx.options.refine.iters, **details}, metrics)
 
 
 def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
@@ -325,8 +306,7 @@ def _harmonizer(ctx):
     from ..insertion.harmonizer import restorer_harmonizer
 
     o = ctx.options
-    return restorer_harmonizer(restorer(ctx), steps=o.harmonize_steps, start_fraction=o.harmonize_start,
-                               samples=o.harmonize_samples, seed=o.seed, max_memory_gib=o.max_memory_gib)
+    return restorer_harmonizer(restorer(ctx), o.harmonize, max_memory_gib=o.sampler.max_memory_gib)
 
 
 @stage("harmonize")
@@ -354,16 +334,16 @@ def harmonize_stage(ctx) -> StageResult:
 @stage("finetune")
 def finetune_stage(ctx) -> StageResult:
     """Colour/opacity-only fine-tune of each inserted vehicle on its harmonized frames."""
-    from ..insertion.insert import InsertionConfig, finetune_sample, insert_frame
+    from ..insertion.insert import finetune_sample, insert_frame
     from ..insertion.placements import camera_view
     from ..io.images import read_image
     from ..io.ply import write_splats
-    from ..optim.finetune import FinetuneConfig, finetune_colors
+    from ..optim.finetune import finetune_colors
     from ..splat.tensors import GaussianTensors
     from .outputs import ASSET_CACHE
     from .scene_render import actor_splats
 
-    cfg = InsertionConfig(finetune=FinetuneConfig(steps=ctx.options.finetune_steps, seed=ctx.options.seed))
+    cfg = ctx.options.insertion
     bg = GaussianTensors.from_gaussians(background(ctx))
     written = []
     for aid in ctx.plan.stage("finetune").actors:
@@ -394,8 +374,6 @@ def evaluate_stage(ctx) -> StageResult:
     """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
     from ..eval.insertion import evaluate_insertion
     from ..eval.views import evaluate_heldout
-    from ..insertion.insert import InsertionConfig
-    from ..optim.finetune import FinetuneConfig
     from ..scene.ground_truth import split_frames
 
     m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
@@ -404,9 +382,7 @@ def evaluate_stage(ctx) -> StageResult:
         metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
     if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
-        cfg = InsertionConfig(train_views=opts.insertion_train_views,
-                              finetune=FinetuneConfig(steps=opts.finetune_steps, seed=opts.seed),
-                              assets_out=ctx.tree.folder("insertion_assets"))
+        cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))
         metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
                                                   details=details, progress=ctx.progress)
     return StageResult({"metrics": sorted(metrics), **({"timings": details["timings"]} if "timings" in details else {})},

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from ..diffusion.defaults import SAMPLER_DEFAULTS
+from ..diffusion.config import SAMPLERS
 
 
 @dataclass
@@ -60,8 +60,8 @@ class SimConfig:
     restore_threshold_m: float = 0.5
     restore_offset_round_m: float = 0.25
     restore_ar_step_m: float = 0.5
-    restore_steps: int = SAMPLER_DEFAULTS["builtin"][0]
-    restore_n_start: int = SAMPLER_DEFAULTS["builtin"][1]
+    restore_steps: int = SAMPLERS["builtin"].steps
+    restore_n_start: int = SAMPLERS["builtin"].n_start
     restore_samples: int = 1
     restore_seed: int = 0
     # Traffic: "replay" keeps the package's actors on their recorded poses; "sumo" drives

@@ -19,7 +19,7 @@ Two kinds of import, two rules:
 
 ``symdrive_core.cli`` is the command line: only modules inside ``cli/`` may import it, at either
 level (and not through ``importlib.import_module`` either). The library keeps its own defaults
-(``diffusion/defaults.py``, the config dataclasses); the options read them from there.
+(the config dataclasses, ``config.py`` beside the code that uses them); the options read them from there.
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ TOP, EVERY = _graph()
 def test_the_parser_sees_the_project_imports():
     # a check of the checker: edges the project is known to have, at the right level
     assert "symdrive_core.errors" in TOP["symdrive_core.cli"]
-    assert "symdrive_core.diffusion.defaults" in TOP["symdrive_core.pipeline.stages"]
+    assert "symdrive_core.diffusion.config" in TOP["symdrive_core.pipeline.stages"]
     call = ast.parse('importlib.import_module("symdrive_core.cli.optim")').body[0].value
     assert _dynamic_targets(call) == ["symdrive_core.cli.optim"]
     assert "symdrive_core.pipeline.preview" in EVERY["symdrive_core.cli.pipeline"]

@@ -3,6 +3,7 @@ another drive, its weights cached under the output folder and reused by later ru
 restore stage sampling with them."""
 
 import json
+from dataclasses import replace
 
 import pytest
 from safetensors import safe_open
@@ -69,7 +70,8 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
     monkeypatch.setattr(models, "load_builtin", lambda path=defaults.DEFAULT_WEIGHTS: loaded.append(path)
                         or load_builtin(path))
     window = PlanOptions(refine=False, frames=[0], offsets=(0.5,))
-    fast = dict(sampler_steps=2, n_start=1, samples=1, eval_methods=("single_view",),
+    fast = dict(sampler=replace(StageOptions().sampler, steps=2, n_start=1, samples=1),
+                eval_methods=("single_view",),
                 adapt=AdaptConfig(iters=2, offsets=(0.5,), cycle_offsets=(1.0,), cycle_iters=10))
     out = tmp_path / "out"
     report = run_scene(drive, out, options=window, stage_options=StageOptions(**fast),
@@ -82,8 +84,8 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
 
     # another run key (the sampler's seed) clears the run's outputs, not the adapted restorer
     made = weights.stat().st_mtime_ns
-    again = run_scene(drive, out, options=window, stage_options=StageOptions(**fast, seed=1),
-                      progress=False)
+    reseeded = StageOptions(**{**fast, "sampler": replace(fast["sampler"], seed=1)})
+    again = run_scene(drive, out, options=window, stage_options=reseeded, progress=False)
     row = next(s for s in again["stages"] if s["name"] == "adapt")
     assert row["ran"] and row["reused"] and weights.stat().st_mtime_ns == made
     assert (out / "restore" / "front" / "+0.5" / "000000.png").exists()

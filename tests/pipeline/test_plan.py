@@ -110,12 +110,13 @@ def test_frustum_test_explicit():
 
 
 def test_plan_command_never_imports_torch_or_diffusion(make_package):
-    """Only the torch-free diffusion modules: the defaults, and the adaptation's config and drive identity."""
+    """Only the torch-free diffusion modules: the configs, the defaults, and the adaptation's config and
+    drive identity."""
     path = make_package(actors=())
     code = ("import sys\nfrom symdrive_core.cli import main\n"
             f"rc = main(['plan', {str(path)!r}])\n"
             "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'diffusers')"
-            " or m.startswith('symdrive_core.diffusion.') and m.split('.')[2] not in ('defaults', 'adapt')]\n"
+            " or m.startswith('symdrive_core.diffusion.') and m.split('.')[2] not in ('config', 'defaults', 'adapt')]\n"
             "print('LOADED', bad)\nsys.exit(rc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr

@@ -38,7 +38,7 @@ def test_default_run_runs_every_stage(recorded_package, tmp_path, capsys):
     ran = {name for name, s in _stages(out).items() if s["ran"]}
     assert {"render", "restore", "refine", "harmonize", "finetune"} <= ran
     refine = _stages(out)["refine"]
-    assert refine["seconds"] > 0 and refine["iterations"] == stages.StageOptions.refine_iters
+    assert refine["seconds"] > 0 and refine["iterations"] == stages.StageOptions().refine.iters
     assert len(read_splats(out / "refine" / "background.ply")) > 0
     assert sorted(p.name for p in (out / "restore" / "front").iterdir()) == ["+1", "-1"]
     assert "ran  refine" in capsys.readouterr().out

@@ -1,6 +1,7 @@
 """The cache key covers everything that changes the result, and only that."""
 
 import json
+from dataclasses import replace
 
 from symdrive_core.io.ply import write_splats
 from symdrive_core.pipeline.plan import PlanOptions
@@ -10,6 +11,10 @@ from tests.conftest import random_gaussians
 from tests.security.hostile import write_package
 
 
+def _samples(k: int) -> StageOptions:
+    return StageOptions(sampler=replace(StageOptions().sampler, samples=k))
+
+
 def _stage(report, name):
     return next(s for s in report["stages"] if s["name"] == name)
 
@@ -17,10 +22,10 @@ def _stage(report, name):
 def test_other_stage_options_are_not_served_from_the_cache(tmp_path):
     pkg = write_package(tmp_path / "pkg")
     out = tmp_path / "out"
-    run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=1))
-    again = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=1))
+    run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=_samples(1))
+    again = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=_samples(1))
     assert not _stage(again, "render")["ran"] and "cached" in _stage(again, "render")["reason"]
-    other = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=StageOptions(samples=2))
+    other = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0]), stage_options=_samples(2))
     assert _stage(other, "render")["ran"] and _stage(other, "render")["frames_rendered"] == 1
     window = run_scene(pkg, out, progress=False, options=PlanOptions(frames=[0, 1]))
     assert _stage(window, "render")["ran"] and _stage(window, "render")["frames_rendered"] == 2

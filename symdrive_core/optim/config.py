@@ -1,0 +1,53 @@
+"""Defaults of reconstruction, density control and the inserted vehicles' fine-tune, as config
+dataclasses that import no torch, so the pipeline's options and the command line compose them
+without loading the optimisers (``reconstruct.py``, ``densify.py``, ``finetune.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class DensifyConfig:
+    grad_threshold: float = 0.0002  # mean NDC gradient norm above which a Gaussian densifies
+    dense_fraction: float = 0.01  # clone below this size (fraction of the scene extent), split above
+    min_opacity: float = 0.005
+    max_angular_size: float = 0.25  # prune when the largest axis exceeds this fraction of its distance
+    max_gaussians: int = 200_000
+
+
+@dataclass
+class ReconstructConfig:
+    iters: int = 3000
+    sh_degree: int = 1
+    sh_every: int = 1000  # raise the active SH degree every this many iterations
+    lr_means: float = 1.6e-4  # times the scene extent; decays exponentially to lr_means_final
+    lr_means_final: float = 1.6e-6
+    lr_sh0: float = 2.5e-3
+    lr_shN: float = 2.5e-3 / 20
+    lr_opacity: float = 5e-2
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    ssim_lambda: float = 0.2
+    depth_weight: float = 0.0  # inverse-depth L1 at the depth maps' measured pixels (0 = off)
+    init_opacity: float = 0.3
+    sky_points: int = 4000
+    max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
+    densify_from: int = 300
+    densify_until_fraction: float = 0.6
+    densify_every: int = 100
+    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    holdout_every: int = 5  # used when the package does not name its held-out frames
+    checkpoint_every: int = 500
+    seed: int = 0
+
+
+@dataclass
+class FinetuneConfig:
+    steps: int = 300
+    lr_sh0: float = 5e-3  # DC term
+    lr_shN: float = 5e-3 / 20  # higher-order terms, as 3DGS does
+    lr_opacity: float = 2.5e-2
+    ssim_lambda: float = 0.2
+    seed: int = 0
