@@ -55,8 +55,9 @@ def cycle_renders(
     recorded = load_views(manifest, frames, camera, depth=True)
     render = SplatRenderer(gaussians)
     shifted = shifted_views(recorded, render, offset_m)
-    # the recorded views' depth maps seed the sky dome, as in the reconstruction itself
-    initial = initial_gaussians(manifest, recorded, cfg)
+    # the recorded views' depth maps seed the sky dome, as in the reconstruction itself; a package
+    # without points starts from the reconstruction's own centres
+    initial = initial_gaussians(manifest, recorded, cfg, seed=gaussians)
     fitted, _ = fit(shifted, initial, cfg, progress=progress, desc=f"cycle {offset_m:+g} m")
     back = SplatRenderer(fitted)
     return np.stack([conventions.to_uint8(back(v.camera)) for v in recorded])

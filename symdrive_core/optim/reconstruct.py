@@ -128,10 +128,17 @@ def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 2048) -> np.ndarray:
     return out.clamp_min(1e-4).numpy()
 
 
-def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructConfig) -> Gaussians:
-    if manifest.background_points is None:
+def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructConfig,
+                      seed: Gaussians | None = None) -> Gaussians:
+    """The start of a fit: the package's point cloud, else the centres and base colours of
+    ``seed`` (a reconstruction of the same scene: what a cycle reconstruction refits), plus the
+    sky dome."""
+    if manifest.background_points is not None:
+        pts, cols = read_points(manifest.resolve(manifest.background_points))
+    elif seed is not None and len(seed):
+        pts, cols = seed.means, np.clip(seed.base_colors, 0.0, 1.0)
+    else:
         raise InputError(manifest.path or manifest.root, "no point cloud to initialise from", "background.points")
-    pts, cols = read_points(manifest.resolve(manifest.background_points))
     rng = np.random.default_rng(cfg.seed)
     if len(pts) > cfg.max_init_points:
         keep = np.sort(rng.choice(len(pts), cfg.max_init_points, replace=False))

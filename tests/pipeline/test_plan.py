@@ -19,9 +19,11 @@ def test_full_scene_runs_every_effect(make_package):
     m = load_manifest(make_package(lateral=(1.0, 2.0), sun=[1, 0, -1], harmonize=True))
     m.effects.finetune = True
     plan = make_plan(m)
-    assert _stages(plan) == {"reconstruct": False, "render": True, "adapt": False, "restore": True, "refine": True,
+    # no recorded images: nothing to refine against or adapt the restorer on
+    assert _stages(plan) == {"reconstruct": False, "render": True, "adapt": False, "restore": True, "refine": False,
                              "harmonize": True, "cast_shadow": True, "finetune": True,
                              "sh_eval": True, "evaluate": False}
+    assert plan.stage("refine").reason == "no recorded images to refine against"
     assert plan.needs_diffusion
 
 
