@@ -311,8 +311,8 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
                                 else "all assets are SH degree 0: colour is the DC term"))
 
     has_gt = _has_ground_truth(manifest) or bool(manifest.ground_truth)
-    stages.append(StageDecision("evaluate", has_gt and opt.evaluate,
-                                "ground truth in the package" if has_gt and opt.evaluate
+    what = "ground truth in the package" if manifest.ground_truth else "recorded images to score held-out frames on"
+    stages.append(StageDecision("evaluate", has_gt and opt.evaluate, what if has_gt and opt.evaluate
                                 else ("evaluation disabled" if has_gt else "no ground truth")))
 
     plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,

@@ -51,7 +51,7 @@ def test_poses_only_demo_street_triangulates_and_reconstructs(tmp_path, capsys):
     # known up, the camera height and the scale
     up = world.S[:3, :3] @ [0.0, 0.0, 1.0]
     assert main(["import", "nerfstudio", str(tj), "--out", str(pkg), "--camera-height", str(CAMERA_HEIGHT),
-                 "--scale", repr(1 / 0.37), "--up=" + ",".join(map(repr, up)), "--heldout-every", "5",
+                 "--scale", repr(1 / 0.37), "--up=" + ",".join(f"{float(v)!r}" for v in up), "--heldout-every", "5",
                  "--copy-images", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "triangulated" in out
