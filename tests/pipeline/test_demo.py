@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from symdrive_core.cli import main
 from symdrive_core.io.images import read_image
 
@@ -23,3 +25,17 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
         assert f"figures/{fig}" in md and read_image(out / "figures" / fig).shape[0] > 100
     assert len(list((out / "trajectory").glob("*.png"))) == 30
     assert "report.md" in capsys.readouterr().out
+
+
+@pytest.mark.slow  # the full demo: three frames at every offset, refinement on (about 20 minutes on 2 cores)
+def test_full_demo_end_to_end(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "--quiet", "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["demo_mode"] == "full"
+    ran = {s["name"] for s in report["stages"] if s["ran"]}
+    assert {"render", "restore", "refine", "harmonize", "finetune", "evaluate"} <= ran
+    rows = report["metrics"]["lateral"]
+    assert {r["method"] for r in rows} >= {"raw_3dgs", "single_view", "ar_d0.5", "geo_ar_d0.5", "refined"}
+    assert {r["offset_m"] for r in rows if r["method"] == "refined"} == {-3.0, -2.0, -1.5, -1.0, -0.5,
+                                                                         0.5, 1.0, 1.5, 2.0, 3.0}
