@@ -23,22 +23,13 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
+from .calib_text import finite_numbers
 from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
 from .package import Source
 from .stereo import RigTolerance, check_pair
 
 PAIRS = (("image_2", "image_3"), ("image_0", "image_1"), ("image_l", "image_r"))
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-
-
-def _numbers(text: str, count: int, path: Path, where: str) -> np.ndarray:
-    try:
-        v = np.array([float(x) for x in text.split()], dtype=np.float64)
-    except ValueError:
-        v = np.zeros(0)
-    if len(v) != count or not np.all(np.isfinite(v)):
-        raise InputError(path, f"expected {count} finite numbers", where)
-    return v
 
 
 def _read_lines(path: Path, what: str) -> list[str]:
@@ -60,7 +51,7 @@ def read_calib(path: Path) -> dict[str, np.ndarray]:
         label = label.strip()
         if not re.fullmatch(r"P\d", label):
             continue  # Tr (velodyne to camera) and the like: not a camera
-        P = _numbers(rest, 12, path, label).reshape(3, 4)
+        P = finite_numbers(rest, 12, path, label).reshape(3, 4)
         K = P[:, :3]
         if not (np.allclose(K[[1, 2, 2], [0, 0, 1]], 0) and np.isclose(K[2, 2], 1) and K[0, 0] > 0 and K[1, 1] > 0
                 and abs(K[0, 1]) < 1e-9 * K[0, 0]):
@@ -80,7 +71,7 @@ def read_poses(path: Path) -> list[np.ndarray]:
     out = []
     for i, line in enumerate(_read_lines(path, "poses")):
         c2w = np.eye(4)
-        c2w[:3] = _numbers(line, 12, path, f"line {i + 1}").reshape(3, 4)
+        c2w[:3] = finite_numbers(line, 12, path, f"line {i + 1}").reshape(3, 4)
         out.append(c2w)
     if not out:
         raise InputError(path, "empty: no poses", "poses")
@@ -113,7 +104,7 @@ def _frames(folder: Path) -> dict[int, Path]:
 def _times(path: Path) -> list[float] | None:
     if not path.is_file():
         return None
-    return [float(_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
+    return [float(finite_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
 
 
 def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats: str | Path | None = None,

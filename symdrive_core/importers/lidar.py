@@ -23,6 +23,7 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..io import check_regular
+from .calib_text import finite_numbers
 from .frames import natural_key
 
 SCAN_SUFFIXES = (".bin", ".npz", ".ply")
@@ -97,14 +98,8 @@ def read_sensor_to_camera(path: Path) -> np.ndarray:
         if m:
             keyed[m.group(1)] = m.group(2)
 
-    def numbers(s: str, n: int, where: str) -> np.ndarray:
-        try:
-            v = np.array([float(x) for x in s.replace(",", " ").split()], dtype=np.float64)
-        except ValueError:
-            raise InputError(path, f"expected {n} numbers", where) from None
-        if len(v) != n or not np.isfinite(v).all():
-            raise InputError(path, f"expected {n} finite numbers, got {len(v)}", where)
-        return v
+    def numbers(text: str, count: int, where: str) -> np.ndarray:
+        return finite_numbers(text, count, path, where)
 
     T = np.eye(4)
     if "Tr_velo_to_cam" in keyed:
