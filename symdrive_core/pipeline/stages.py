@@ -79,6 +79,9 @@ class Shared:
     restorer: object = None
     drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
     adapted: Path | None = None  # the folder of this drive's adapted restorer
+    # by camera name: the geometry-guided chain's warper (None: the package gives it no ground or depth)
+    warpers: dict = field(default_factory=dict)
+    warper_errors: dict = field(default_factory=dict)  # by camera name: why it has none
     restored: list = field(default_factory=list)  # RestoredView, for refinement
 
 
@@ -121,6 +124,21 @@ def drive(ctx) -> dict:
     if ctx.shared.drive is None:
         ctx.shared.drive = drive_identity(ctx.manifest, background_path(ctx))
     return ctx.shared.drive
+
+
+def warper(ctx, cam):
+    """The geometry-guided chain's warper of ``cam`` over this run's background, built once per run
+    (the adapt and restore stages share it); None where the option is off or the package gives the
+    warp no ground or depth (the reason is kept in ``ctx.shared.warper_errors``)."""
+    from ..diffusion.warp import WarpError, package_warper
+
+    if ctx.options.geometry_guided and cam.name not in ctx.shared.warpers:
+        try:
+            ctx.shared.warpers[cam.name] = package_warper(ctx.manifest, cam, background(ctx))
+        except WarpError as e:
+            ctx.shared.warpers[cam.name] = None
+            ctx.shared.warper_errors[cam.name] = str(e)
+    return ctx.shared.warpers.get(cam.name)
 
 
 def adapted_folder(ctx) -> Path:
@@ -171,16 +189,10 @@ def adapt_stage(ctx) -> StageResult:
     """Fine-tune the shipped restorer on this drive's own pairs (the plan found its weights trained
     on another); the geometry-guided restorer where the package gives the warp, else the default."""
     from ..diffusion.adapt import adapt_restorer
-    from ..diffusion.warp import WarpError, package_warper
     from ..scene.ground_truth import truth_camera
 
     m, opts = ctx.manifest, ctx.options
-    guided = opts.geometry_guided
-    if guided:
-        try:
-            package_warper(m, truth_camera(m), background(ctx))
-        except WarpError:
-            guided = False
+    guided = warper(ctx, truth_camera(m)) is not None
     folder = adapted_folder(ctx)
     record = adapt_restorer(m, background(ctx), drive(ctx), folder, opts.adapt, guided=guided,
                             progress=ctx.progress)
@@ -199,7 +211,6 @@ def restore_stage(ctx) -> StageResult:
     from tqdm import tqdm
 
     from ..diffusion.restore import LateralChain, RestoredView
-    from ..diffusion.warp import WarpError, package_warper
     from ..eval.restoration import run_lateral_restoration
     from ..eval.views import evaluate_lateral
     from ..io.images import read_image, write_image
@@ -210,19 +221,7 @@ def restore_stage(ctx) -> StageResult:
     g, model, sampler = background(ctx), restorer(ctx), opts.sampler
     render = SplatRenderer(g)  # one parameter conversion for scoring, chains and the remaining views
     plain = f"ar_d{opts.ar_step:g}" if opts.ar_step > 0 else "single_view"
-    warpers: dict = {}  # by camera name: the geometry-guided chain's warper, None where it has none
-    details: dict = {}
-
-    def warper(cam):
-        if opts.geometry_guided and cam.name not in warpers:
-            try:
-                warpers[cam.name] = package_warper(m, cam, g)
-            except WarpError as e:
-                warpers[cam.name] = None
-                details.setdefault("geometry_guided_off", {})[cam.name] = str(e)
-        return warpers.get(cam.name)
-
-    default = ("geo_" if warper(truth_camera(m)) else "") + plain
+    default = ("geo_" if warper(ctx, truth_camera(m)) else "") + plain
     offsets, scored_frames = decision.offsets, ctx.plan.window  # scoring: every truth frame in the window
     done: set[tuple[str, int, float]] = set()
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
@@ -231,7 +230,7 @@ def restore_stage(ctx) -> StageResult:
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
         scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=scored_frames,
-                                      progress=ctx.progress, warper=warpers.get(truth_camera(m).name),
+                                      progress=ctx.progress, warper=warper(ctx, truth_camera(m)),
                                       render=render)
         metrics["lateral"] = evaluate_lateral(scored, g, "raw_3dgs", scored_frames, render=render) + res.rows
         ctx.shared.restored = list(res.views[default])
@@ -248,11 +247,12 @@ def restore_stage(ctx) -> StageResult:
             image = read_image(path, channels=3)
         else:
             if (cam.name, fi) not in chains:
-                chains[cam.name, fi] = LateralChain.for_frame(m, cam, fi, model, render, sampler, warper(cam))
-            image = chains[cam.name, fi].restore(off, opts.ar_step, guided=warper(cam) is not None)
+                chains[cam.name, fi] = LateralChain.for_frame(m, cam, fi, model, render, sampler, warper(ctx, cam))
+            image = chains[cam.name, fi].restore(off, opts.ar_step, guided=warper(ctx, cam) is not None)
             write_image(path, image)
         ctx.shared.restored.append(RestoredView.shifted(cam, fi, off, image))
-    return StageResult({"views_restored": len(ctx.shared.restored), "method": default, **details}, metrics)
+    off = {"geometry_guided_off": dict(ctx.shared.warper_errors)} if ctx.shared.warper_errors else {}
+    return StageResult({"views_restored": len(ctx.shared.restored), "method": default, **off}, metrics)
 
 
 @stage("refine")
