@@ -7,12 +7,13 @@ Builds a self-contained scene package in a temporary folder from the demo street
 (``symdrive_core/data/demo_street``): the camera's ``K`` scaled to the new size, the background
 reconstruction densified to ``--gaussians`` by splitting (each Gaussian replaced by children drawn
 from its own distribution, scales shrunk so the children fill the same volume), two inserted cars
-(the demo's hatchback and sedan) in every benchmarked frame, lateral offsets +-1 and +-3 m and no
-ground truth (the recorded 256x144 images do not match the new size, so each chain starts from the
-render at the recorded camera). Then ``run_scene`` runs the plan (render, restore, harmonize,
+(the demo's hatchback and sedan) in every benchmarked frame, lateral offsets +-1 and +-3 m, the
+recorded 256x144 images upsampled to the new size (so the chain is the geometry-guided one, as on
+a real package) and no ground truth. Then ``run_scene`` runs the plan (render, restore, harmonize,
 finetune; refinement only with ``--refine-iters``) and the script prints seconds per frame for
 each stage that ran and the process's peak RSS (``resource.getrusage``), and writes them as JSON
-with ``--json``.
+with ``--json``. ``--compare`` first runs the previous default restoration (the guided chain at
+d = 0.5 m, the mean of 8 noisy samples) on the same package and prints the ratios of the two.
 """
 
 from __future__ import annotations
@@ -58,8 +59,17 @@ def densify(g, n: int, seed: int = 0):
     )
 
 
+def upsampled(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    import torch
+
+    t = torch.from_numpy(image).permute(2, 0, 1)[None]
+    t = torch.nn.functional.interpolate(t, size=(height, width), mode="bicubic", align_corners=False)
+    return t[0].permute(1, 2, 0).clamp(0, 1).numpy()
+
+
 def build_package(root: Path, width: int, height: int, gaussians: int, frames: int) -> Path:
     """A self-contained package in ``root``: manifest, the two cars' assets, the densified background."""
+    from symdrive_core.io.images import read_image, write_image
     from symdrive_core.io.ply import read_splats, write_splats
 
     m = json.loads((DEMO / "manifest.json").read_text())
@@ -73,8 +83,10 @@ def build_package(root: Path, width: int, height: int, gaussians: int, frames: i
         K[0] *= sx
         K[1] *= sy
         f["K"] = K.tolist()
-        f.pop("image", None)
         f.pop("depth", None)
+        image = read_image(DEMO / f["image"], channels=3)
+        f["image"] = f"images/{fi:06d}.png"
+        write_image(root / f["image"], upsampled(image, width, height))
         new_frames.append(f)
     cam.update(width=width, height=height, frames=new_frames)
     m["frames"] = [{"index": i, "timestamp": m["frames"][fi]["timestamp"]} for i, fi in enumerate(keep)]
@@ -97,7 +109,8 @@ def build_package(root: Path, width: int, height: int, gaussians: int, frames: i
     m["output"] = "output"
     bg = densify(read_splats(DEMO / m["background"]["splats"], drop_invalid=True), gaussians)
     write_splats(root / "background.ply", bg)
-    m["background"] = {"splats": "background.ply"}
+    shutil.copy2(DEMO / m["background"]["points"], root / "points.ply")
+    m["background"] = {"splats": "background.ply", "points": "points.ply"}
     (root / "manifest.json").write_text(json.dumps(m, indent=1))
     return root
 
@@ -116,6 +129,9 @@ def main(argv=None) -> int:
     p.add_argument("--refine-iters", type=int, default=0, help="3DGS refinement iterations (0: not run)")
     p.add_argument("--keep", type=Path, help="build the package here and keep it (default: a temporary folder)")
     p.add_argument("--json", type=Path, help="also write the results here")
+    p.add_argument("--compare", action="store_true",
+                   help="also run the previous default restoration (guided d = 0.5 m, mean of 8 samples) and "
+                        "print the ratios")
     p.add_argument("--quiet", action="store_true")
     args = p.parse_args(argv)
     width = args.width or (960 if args.quick else 1920)
@@ -125,9 +141,15 @@ def main(argv=None) -> int:
 
     from symdrive_core.insertion.config import InsertionConfig
     from symdrive_core.optim.config import FinetuneConfig
-    from symdrive_core.pipeline.plan import PlanOptions
-    from symdrive_core.pipeline.run import run_scene
     from symdrive_core.pipeline.stages import StageOptions
+
+    opts = StageOptions(insertion=InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_iters)))
+    opts.refine = replace(opts.refine, iters=max(args.refine_iters, 1))
+    sampler = {"max_memory_gib": args.max_memory, "samples": args.samples}
+    opts.sampler = replace(opts.sampler, **{k: v for k, v in sampler.items() if v})
+    runs = {"default": opts}
+    if args.compare:
+        runs["previous"] = replace(opts, guided_ar_step=0.5, sampler=replace(opts.sampler, samples=8, noise_free=False))
 
     tmp = None
     if args.keep:
@@ -140,31 +162,54 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         build_package(root / "package", width, height, gaussians, frames)
         build_s = time.perf_counter() - t0
-        opts = StageOptions(insertion=InsertionConfig(finetune=FinetuneConfig(steps=args.finetune_iters)))
-        opts.refine = replace(opts.refine, iters=max(args.refine_iters, 1))
-        sampler = {"max_memory_gib": args.max_memory, "samples": args.samples}
-        opts.sampler = replace(opts.sampler, **{k: v for k, v in sampler.items() if v})
-        t0 = time.perf_counter()
-        report = run_scene(root / "package", root / "out", options=PlanOptions(refine=args.refine_iters > 0),
-                           progress=not args.quiet, stage_options=opts)
-        total = time.perf_counter() - t0
+        results = {name: run_once(root, name, o, args, frames) for name, o in runs.items()}
     finally:
         if tmp is not None:
             tmp.cleanup()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kilobytes
-    stages = {s["name"]: round(s["seconds"] / frames, 2) for s in report["stages"] if s.get("ran") and "seconds" in s}
-    result = {"width": width, "height": height, "gaussians": gaussians, "frames": frames,
-              "max_memory_gib": opts.sampler.max_memory_gib, "build_seconds": round(build_s, 1),
-              "run_seconds": round(total, 1), "seconds_per_frame": stages,
-              "peak_rss_gib": round(peak / 2**30, 2)}
-    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), "
-          f"max memory {opts.sampler.max_memory_gib} GiB")
-    for name, sec in stages.items():
-        print(f"  {name:<10} {sec:8.2f} s/frame")
-    print(f"  total run {total:.1f} s, package built in {build_s:.1f} s, peak RSS {result['peak_rss_gib']} GiB")
+    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), max memory {opts.sampler.max_memory_gib} GiB,"
+          f" package built in {build_s:.1f} s")
+    for name, r in results.items():
+        print(f"{name} ({r['method']}, {r['sampler']}):")
+        for stage, sec in r["seconds_per_frame"].items():
+            print(f"  {stage:<10} {sec:8.2f} s/frame")
+        print(f"  frame      {r['frame_seconds']:8.2f} s, total run {r['run_seconds']:.1f} s, "
+              f"peak RSS {r['peak_rss_gib']} GiB")
+    if args.compare:
+        new, old = results["default"], results["previous"]
+        ratios = {"restore": old["seconds_per_frame"]["restore"] / new["seconds_per_frame"]["restore"],
+                  "frame": old["frame_seconds"] / new["frame_seconds"]}
+        print("previous / default: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
+        results["ratios"] = {k: round(v, 2) for k, v in ratios.items()}
     if args.json:
-        args.json.write_text(json.dumps(result, indent=1) + "\n")
+        args.json.write_text(json.dumps({"width": width, "height": height, "gaussians": gaussians, "frames": frames,
+                                         "max_memory_gib": opts.sampler.max_memory_gib,
+                                         "build_seconds": round(build_s, 1), **results}, indent=1) + "\n")
     return 0
+
+
+PER_FRAME = ("render", "restore", "harmonize", "finetune")  # refinement and adaptation are per drive
+
+
+def run_once(root: Path, name: str, opts, args, frames: int) -> dict:
+    """One ``run_scene`` of the package with ``opts`` into its own folder. The restorer's
+    adaptation to the drive is off: it is paid once per drive, not per frame. The peak RSS is the
+    process's so far (the runs go in turn, the default first)."""
+    from symdrive_core.pipeline.plan import PlanOptions
+    from symdrive_core.pipeline.run import run_scene
+
+    t0 = time.perf_counter()
+    report = run_scene(root / "package", root / f"out-{name}", options=PlanOptions(refine=args.refine_iters > 0,
+                                                                                   adapt=False),
+                       progress=not args.quiet, stage_options=opts)
+    total = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kilobytes
+    ran = [s for s in report["stages"] if s.get("ran") and "seconds" in s]
+    stages = {s["name"]: round(s["seconds"] / frames, 2) for s in ran}
+    restore = next((s for s in ran if s["name"] == "restore"), {})
+    return {"method": restore.get("method"), "sampler": "noise-free" if opts.sampler.noise_free else
+            f"mean of {opts.sampler.samples}", "run_seconds": round(total, 1), "seconds_per_frame": stages,
+            "frame_seconds": round(sum(v for k, v in stages.items() if k in PER_FRAME), 2),
+            "peak_rss_gib": round(peak / 2**30, 2)}
 
 
 if __name__ == "__main__":

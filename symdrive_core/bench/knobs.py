@@ -113,14 +113,21 @@ def lane_iou(rows: list[dict]) -> dict:
 
 
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
-    """Sampler steps / ``N_start`` and the auto-regressive step ``d`` on lateral views."""
-    from ..diffusion.config import SamplerConfig
+    """Sampler steps, start noise and ``N_start`` on the pipeline's chain (the geometry-guided one
+    where the package gives the warp a ground), and the auto-regressive step ``d`` of each chain."""
+    from ..diffusion.restore import chain_warper
+    from ..diffusion.warp import WarpError
     from ..eval.restoration import run_lateral_restoration
     from ..eval.views import evaluate_lateral
-    from ..scene.ground_truth import lateral_views, with_lateral_offsets
+    from ..pipeline.stages import chain_method
+    from ..scene.ground_truth import lateral_views, truth_camera, with_lateral_offsets
 
     scoped = with_lateral_offsets(manifest, budget.offsets)
     frames = spread(sorted({v.frame for v in lateral_views(scoped)}), budget.restore_frames)
+    try:
+        warper = chain_warper(scoped, truth_camera(scoped), gaussians)
+    except WarpError:
+        warper = None
 
     def raw() -> dict:  # the reference every restoration setting should beat
         t0 = time.perf_counter()
@@ -128,34 +135,49 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
         return {"psnr": float(np.mean([r["psnr"] for r in rows])), "ssim": float(np.mean([r["ssim"] for r in rows])),
                 **lane_iou(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
 
-    def measure(method: str, steps: int, n_start: int, samples: int = DEFAULTS.sampler.samples):
+    def measure(method: str, **sampler):
+        config = replace(DEFAULTS.sampler, max_memory_gib=None, **sampler)
+
         def run() -> dict:
             t0 = time.perf_counter()
             res = run_lateral_restoration(scoped, gaussians, restorer, methods=(method,), frames=frames,
-                                          sampler=SamplerConfig(steps, n_start, DEFAULTS.sampler.seed, samples),
-                                          progress=False)
+                                          sampler=config, progress=False, warper=warper)
             views = len(res.views.get(method, []))
             return {"psnr": float(np.mean([r["psnr"] for r in res.rows])),
                     "ssim": float(np.mean([r["ssim"] for r in res.rows])), **lane_iou(res.rows),
                     "seconds": (time.perf_counter() - t0) / max(views, 1), "per": "view"}
         return run
 
-    d = f"ar_d{DEFAULTS.ar_step:g}"
-    s, n = DEFAULTS.sampler.steps, DEFAULTS.sampler.n_start
+    d = chain_method(DEFAULTS, guided=warper is not None)
+    s, n, k = DEFAULTS.sampler.steps, DEFAULTS.sampler.n_start, DEFAULTS.sampler.samples
     t_start = 1.0 - n / s  # every sampler-steps setting starts at the default's noise level
     steps = dict.fromkeys((s, 10, 20, 50))
-    return [
-        *[Setting("sampler steps", f"{k} (from step {round(k * (1 - t_start))})", k == s,
-                  measure(d, k, round(k * (1 - t_start)))) for k in steps],
-        *[Setting("samples averaged", str(k), k == DEFAULTS.sampler.samples, measure(d, s, n, k))
-          for k in dict.fromkeys((1, 4, DEFAULTS.sampler.samples))],
+    noise = {"noise-free, one evaluation": {"noise_free": True}, "1 noisy sample": {"noise_free": False, "samples": 1},
+             **{f"mean of {j} noisy samples": {"noise_free": False, "samples": j} for j in dict.fromkeys((4, k))}}
+    unguided, guided = chain_method(DEFAULTS, guided=False), chain_method(DEFAULTS, guided=True)
+
+    def step_label(method: str) -> str:
+        method = method.removeprefix("geo_")
+        return "single view" if method == "single_view" else method.replace("ar_d", "") + " m"
+
+    settings = [
+        *[Setting("sampler steps", f"{j} (from step {round(j * (1 - t_start))})", j == s,
+                  measure(d, steps=j, n_start=round(j * (1 - t_start)))) for j in steps],
+        *[Setting("start noise", label, all(getattr(DEFAULTS.sampler, f) == v for f, v in kw.items()),
+                  measure(d, **kw)) for label, kw in noise.items()],
         # the paper's protocol: 50 steps, one sample
-        *[Setting("N_start of 50 steps, 1 sample", f"{k} (t = {1 - k / 50:.2f})", abs(k / 50 - n / s) < 1e-9,
-                  measure(d, 50, k, 1)) for k in dict.fromkeys((0, 5, 10, 15, round(50 * n / s)))],
+        *[Setting("N_start of 50 steps, 1 sample", f"{j} (t = {1 - j / 50:.2f})", abs(j / 50 - n / s) < 1e-9,
+                  measure(d, steps=50, n_start=j, samples=1, noise_free=False))
+          for j in dict.fromkeys((0, 5, 10, 15, round(50 * n / s)))],
         Setting("AR step d", "no restoration (raw 3DGS)", False, raw),
-        *[Setting("AR step d", m.replace("ar_d", "") + " m" if m != "single_view" else "single view",
-                  m == d, measure(m, s, n)) for m in dict.fromkeys(("single_view", "ar_d0.5", "ar_d1.0", "ar_d1.5", d))],
+        *[Setting("AR step d", step_label(m), m == unguided, measure(m))
+          for m in dict.fromkeys(("single_view", "ar_d0.5", "ar_d1.0", "ar_d1.5", unguided))],
     ]
+    if warper is not None:
+        settings += [Setting("AR step d, guided", "warp alone (no restorer)", False, measure("warp")),
+                     *[Setting("AR step d, guided", step_label(m), m == guided, measure(m))
+                       for m in dict.fromkeys(("geo_single_view", "geo_ar_d0.5", "geo_ar_d1.0", guided))]]
+    return settings
 
 
 def finetune_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
@@ -309,14 +331,16 @@ WHY_DEFAULTS = {
     "sampler steps": f"{DEFAULTS.sampler.steps} steps from step {DEFAULTS.sampler.n_start} (one Euler step from t = 0.2): the "
                      "shipped small restorer's errors add up along the Euler path, so the fewest steps from a low "
                      "noise level measure best.",
-    "samples averaged": f"{DEFAULTS.sampler.samples}: the mean of samples estimates the posterior mean, which PSNR rewards; "
-                        "one sample (the paper's) keeps the small restorer's grain. Time grows less than linearly "
-                        "(one batch).",
+    "start noise": "noise-free: one evaluation from the start without noise scores as the mean of 8 noisy "
+                   "samples does (which cancels each sample's grain: one noisy sample, the paper's, keeps it), "
+                   "for an eighth of the work.",
     "N_start of 50 steps, 1 sample": "the shipped small restorer keeps the render's structure best when it starts "
                                      "low on the noise scale (Flux in the paper starts at 10 of 50).",
     "AR step d": f"{DEFAULTS.ar_step:g} m, the paper's method: each view is restored from a restored neighbour "
-                 "and a render on its other side, which measures above the single-view ablation; a longer step "
-                 "chains fewer restorations and scores about the same with the shipped restorer.",
+                 "and a render on its other side, which measures above the single-view ablation; 1 m chains half "
+                 "the restorations for the same PSNR but loses lane IoU at 1 m.",
+    "AR step d, guided": f"{DEFAULTS.guided_ar_step:g} m: the guided chain scores at least as well as at 0.5 m with "
+                         "half the restorations, and above the warp it starts from.",
     "cast shadow": "on, at the scene's effects.shadow_ratio (0.4 when the scene gives none): a car "
                    "without its shadow floats; how dark shade is depends on the sky, so the table shows the "
                    "cost of a wrong ratio.",

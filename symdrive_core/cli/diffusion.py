@@ -21,7 +21,7 @@ from ..diffusion.config import (
     TrainConfig,
 )
 from ..diffusion.defaults import EVALUATED_METHODS
-from ..pipeline.stages import StageOptions
+from ..pipeline.stages import StageOptions, chain_step
 from . import (
     add_frames_option,
     add_offsets_option,
@@ -176,8 +176,9 @@ def add_commands(sub) -> None:
     add_offsets_option(p, default=[0.5, 1.0, 1.5, 2.0, 3.0],
                        help="the views to restore (with --evaluate, the views --refine trains on; scoring "
                             "covers every offset with ground truth)")
-    p.add_argument("--step", type=float, default=StageOptions.ar_step,
-                   help=f"chain step d in metres (0 = single-view; default {default_of(StageOptions, 'ar_step')})")
+    p.add_argument("--step", type=float,
+                   help=f"chain step d in metres (0 = single-view; default {default_of(StageOptions, 'ar_step')}, "
+                        f"{default_of(StageOptions, 'guided_ar_step')} with --geometry-guided)")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=positive_int, help=f"sampler steps (default: {_per_backend('steps')})")
     p.add_argument("--n-start", type=count_int,
@@ -186,6 +187,9 @@ def add_commands(sub) -> None:
     p.add_argument("--samples", type=positive_int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         f"times the work (default: {_per_backend('samples')})")
+    p.add_argument("--noise-free", action=argparse.BooleanOptionalAction,
+                   help="start from the initialisation without noise: one deterministic sample in place of the "
+                        f"mean of --samples (default: {_per_backend('noise_free')})")
     p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles "
                         f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
@@ -348,11 +352,14 @@ def _restore(args) -> int:
 
     # the backend's sampler with the pipeline's memory budget, then what the command line set
     default = replace(SAMPLERS[args.backend], max_memory_gib=StageOptions().sampler.max_memory_gib)
-    sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", max_memory_gib="max_memory"))
+    sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", "noise_free",
+                                         max_memory_gib="max_memory"))
     steps, n_start = sampler.steps, sampler.n_start
     if n_start >= steps:
         raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "
                             f"below --steps {steps}: the sampler starts at step n_start of steps")
+    if args.step is None:
+        args.step = chain_step(StageOptions(), args.geometry_guided)
     torch.set_num_threads(args.threads)
     manifest, gaussians = _load_scene(args)
     _check_frames(manifest, args)

@@ -50,6 +50,12 @@ class SamplerConfig:
     # Average of this many independent samples (one batch): an estimate of the posterior mean,
     # which is what PSNR rewards, at up to this many times the cost. 1 is the paper's single sample.
     samples: int = 1
+    # Start from the initialisation without noise: one deterministic sample in place of the mean
+    # of ``samples`` (``samples`` is then ignored). With the built-in restorer's one step from
+    # t = 0.2 it scores as the mean of 8 does, for an eighth of the work (docs/results.md). A
+    # sampler that starts from pure noise (``n_start`` 0) has no initialisation to start from and
+    # draws its noise whatever this says.
+    noise_free: bool = False
     # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
     # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
     max_memory_gib: float | None = None
@@ -132,9 +138,10 @@ class FluxTrainConfig:
 
 
 # The sampler per restorer backend. The built-in restorer's are measured (`symdrive bench
-# accuracy-time`): its errors add up per step and the mean of samples cancels their grain, so one
-# step from t = 0.2 averaged over 8 samples. Flux keeps the paper's 50 steps from step 10, one sample.
-SAMPLERS = {"builtin": SamplerConfig(steps=5, n_start=4, samples=8), "flux": SamplerConfig()}
+# accuracy-time`): its errors add up per step, so one step from t = 0.2; from a noise-free start
+# that one step scores as the mean of 8 noisy samples does (which cancels their grain), for an
+# eighth of the work. Flux keeps the paper's 50 steps from step 10, one sample.
+SAMPLERS = {"builtin": SamplerConfig(steps=5, n_start=4, samples=8, noise_free=True), "flux": SamplerConfig()}
 
 
 @dataclass(frozen=True)

@@ -66,17 +66,20 @@ def restore_image(
     grain from the per-channel noise into them."""
     if config.n_start > 0 and init is None:
         raise ValueError("n_start > 0 needs an initialisation image")
+    noise_free = config.noise_free and config.n_start > 0  # from step 0 the start is the noise itself
     lat = restorer.latent
     zl, zr = lat.encode(left), lat.encode(right)
     ts = flow.timesteps(config.steps, restorer.time_shift(zl.shape))
-    g = generator(config.seed)
     z0 = lat.encode(init) if init is not None else torch.zeros_like(zl)
     zg = restorer.encode_guide(guide) if guide is not None and getattr(restorer, "guide_channels", 0) else None
-    k = max(1, int(config.samples))
+    k = 1 if noise_free else max(1, int(config.samples))
     if k > 1:
         zl, zr, z0 = (x.repeat_interleave(k, dim=0) for x in (zl, zr, z0))
         zg = None if zg is None else zg.repeat_interleave(k, dim=0)
-    z = flow.start_state(z0, ts, config.n_start, g)
+    if noise_free:
+        z = flow.noised(z0, 0.0, float(ts[config.n_start]))
+    else:
+        z = flow.start_state(z0, ts, config.n_start, generator(config.seed))
     velocity = restorer.velocity
     if config.max_memory_gib is not None:
         from .tiling import tiled_velocity

@@ -116,6 +116,11 @@ class UNet(nn.Module):
                 raise ValueError(f"this restorer takes a {self.config.guide_channels}-channel guide (warp and mask)")
             views.append(guide.to(z_t.dtype))
         x = F.pad(torch.cat(views, dim=1), pad, mode="replicate")
+        if not self.training:
+            # NHWC, oneDNN's preferred layout for convolutions: the same velocity to float rounding,
+            # 1.75x faster on a 1080p frame on the CPU (scripts/bench_restorer_cpu.py); training
+            # keeps NCHW so its runs replay bit for bit
+            x = x.contiguous(memory_format=torch.channels_last)
         temb = self.time_mlp(time_embedding(t, self.config.width))
         x = self.inp(x)
         skips = []
@@ -130,7 +135,7 @@ class UNet(nn.Module):
             if x.shape[-2:] != skip.shape[-2:]:
                 x = F.interpolate(x, size=skip.shape[-2:], mode="nearest")
             x = block(torch.cat([x, skip], dim=1), temb)
-        x = self.out(F.silu(self.out_norm(x)))[..., :h, :w]
+        x = self.out(F.silu(self.out_norm(x)))[..., :h, :w].contiguous()
         if not residual:
             return x
         s2 = self.config.cond_sigma**2

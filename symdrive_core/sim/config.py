@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from ..diffusion.config import SAMPLERS
+from ..diffusion.config import SAMPLERS, SamplerConfig
 
 
 @dataclass
@@ -54,16 +54,13 @@ class SimConfig:
     # Online restoration of off-path views (see restore.py): when the ego is more than
     # restore_threshold_m sideways of the recorded path, each camera's background goes through the
     # restorer, auto-regressively (step restore_ar_step_m) from the nearest recorded frame, cached
-    # per (frame, camera, offset rounded to restore_offset_round_m). Sampler: the built-in
-    # restorer's steps and start (a single Euler step), one sample.
+    # per (frame, camera, offset rounded to restore_offset_round_m), sampled as the pipeline samples
+    # (the built-in restorer's sampler: one evaluation from a noise-free start).
     restore: bool = False
     restore_threshold_m: float = 0.5
     restore_offset_round_m: float = 0.25
     restore_ar_step_m: float = 0.5
-    restore_steps: int = SAMPLERS["builtin"].steps
-    restore_n_start: int = SAMPLERS["builtin"].n_start
-    restore_samples: int = 1
-    restore_seed: int = 0
+    restore_sampler: SamplerConfig = field(default_factory=lambda: SAMPLERS["builtin"])
     # Traffic: "replay" keeps the package's actors on their recorded poses; "sumo" drives
     # vehicles with SUMO/TraCI around the ego.
     traffic: str = "replay"

@@ -47,13 +47,6 @@ class OnlineRestorer:
         self.model = load_restorer()
         self._render = SplatRenderer(read_splats(m.resolve(m.background_splats)))
 
-    def sampler(self):
-        from ..diffusion.sampler import SamplerConfig
-
-        c = self.config
-        return SamplerConfig(steps=c.restore_steps, n_start=c.restore_n_start, seed=c.restore_seed,
-                             samples=c.restore_samples)
-
     def place(self, camera: str, c2w: np.ndarray) -> tuple[int, float]:
         """(nearest recorded frame by camera centre, lateral offset m along its right axis, rounded)."""
         cam = self.env.manifest.camera(camera)
@@ -84,7 +77,7 @@ class OnlineRestorer:
                 recorded = _resize(read_image(m.resolve(cf.image), channels=3), w, h)
             else:
                 recorded = self._render(view)
-            self.chains[key] = LateralChain(self.model, self._render, recorded, view, self.sampler())
+            self.chains[key] = LateralChain(self.model, self._render, recorded, view, self.config.restore_sampler)
         return self.chains[key]
 
     def background(self, camera: str, c2w: np.ndarray) -> np.ndarray | None:

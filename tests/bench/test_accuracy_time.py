@@ -60,7 +60,8 @@ def test_accuracy_time_command_quick(tmp_path, capsys):
     assert main(["bench", "accuracy-time", "--quick", "--quiet", "--out", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "accuracy_time.json").read_text())["rows"]
     knobs = {r["knob"] for r in rows}
-    assert {"sampler steps", "N_start of 50 steps, 1 sample", "AR step d", "alpha threshold", "fine-tune iterations",
+    assert {"sampler steps", "start noise", "N_start of 50 steps, 1 sample", "AR step d", "AR step d, guided",
+            "alpha threshold", "fine-tune iterations",
             "antialiasing", "cast shadow"} <= knobs
     assert all(sum(r["default"] for r in rows if r["knob"] == k) == 1 for k in knobs)
     assert (tmp_path / "pareto.png").exists()

@@ -112,6 +112,30 @@ def test_averaging_k_samples_divides_the_seed_variance_by_about_k():
     assert 4.0 < ratio < 16.0
 
 
+def test_a_noise_free_start_is_one_deterministic_evaluation():
+    """No noise is drawn: the seed and ``samples`` change nothing, the restorer runs once on a
+    batch of one, and with the exact velocity one step still lands on the data."""
+    g = torch.Generator().manual_seed(3)
+    y, init = torch.rand(1, 3, 8, 12, generator=g), torch.rand(1, 3, 8, 12, generator=g)
+    oracle = OracleRestorer(y)
+    out = restore_image(oracle, init, init, init, SamplerConfig(steps=5, n_start=4, samples=8, noise_free=True))
+    assert torch.allclose(out, y, atol=1e-5)
+    assert len(oracle.calls) == 1 and oracle.calls[0][0].shape[0] == 1
+    model = tiny_builtin(seed=2)
+    a, b = torch.rand(1, 3, 16, 16, generator=g), torch.rand(1, 3, 16, 16, generator=g)
+    run = lambda seed, samples: restore_image(model, a, b, a, SamplerConfig(steps=5, n_start=4, seed=seed,
+                                                                            samples=samples, noise_free=True))
+    assert torch.equal(run(0, 1), run(7, 8))
+    # the state it starts from is the noisy one's mean: (1 - t) init
+    z = 0.8 * (a * 2 - 1)
+    v = model.velocity(z, torch.full((1,), 0.2), a * 2 - 1, b * 2 - 1)
+    assert torch.allclose(run(0, 1), ((z - 0.2 * v) * 0.5 + 0.5).clamp(0, 1), atol=1e-6)
+    # from pure noise there is no initialisation to start from: the noise is drawn as asked
+    from_noise = lambda seed: restore_image(model, a, b, None, SamplerConfig(steps=2, n_start=0, seed=seed,
+                                                                             noise_free=True))
+    assert torch.equal(from_noise(1), from_noise(1)) and not torch.equal(from_noise(1), from_noise(2))
+
+
 def test_a_step_from_a_degraded_start_lands_on_the_data():
     g = torch.Generator().manual_seed(3)
     x0, start, eps = (torch.rand(2, 3, 5, 6, generator=g) for _ in range(3))

@@ -19,6 +19,7 @@ H, W, TILE, OVERLAP = 96, 128, 64, 16
 # alignment to 8), per-pixel error averaged over channels, tiled against untiled:
 #   restoration, 5 steps from step 4 (the pipeline's default start), 2 samples: max 0.033, mean 0.0059
 #   restoration, 4 steps from step 1, 2 samples:                               max 0.090, mean 0.0102
+#   restoration, 5 steps from step 4, noise-free start (the default since):   max 0.033, mean 0.0060
 #   harmonization, 10 steps from step 2, 2 samples, inside the region:         max 0.091, mean 0.0139
 # The difference is the GroupNorm statistics of a tile against those of the whole image, spread
 # evenly over the image: the mean error within 2 px of a tile border is within 5 % of the interior's.
@@ -107,12 +108,15 @@ def test_untiled_within_budget_is_identical(restorer):
     assert (got - ref).abs().max() <= 1e-6 * ref.abs().max()
 
 
-@pytest.mark.parametrize("steps,n_start,tol", [(5, 4, TOL_DEFAULT), (4, 1, TOL_LONG)])
-def test_tiled_matches_untiled_without_seams(restorer, steps, n_start, tol):
+@pytest.mark.parametrize("steps,n_start,noise_free,tol", [(5, 4, False, TOL_DEFAULT), (4, 1, False, TOL_LONG),
+                                                          (5, 4, True, TOL_DEFAULT)])
+def test_tiled_matches_untiled_without_seams(restorer, steps, n_start, noise_free, tol):
     left, right, init = scene()
-    a = restore_image(restorer, left, right, init, SamplerConfig(steps=steps, n_start=n_start, samples=2))
-    tiled = tiny_budget(steps=steps, n_start=n_start, samples=2)
-    plan = tiling.plan_for(restorer, (2, 3, H, W), tiled.tiling())
+    kw = dict(steps=steps, n_start=n_start, samples=2, noise_free=noise_free)
+    a = restore_image(restorer, left, right, init, SamplerConfig(**kw))
+    tiled = tiny_budget(**kw)
+    batch = 1 if noise_free else 2
+    plan = tiling.plan_for(restorer, (batch, 3, H, W), tiled.tiling())
     assert len(plan.tiles) == 6 and plan.batch == 1
     b = restore_image(restorer, left, right, init, tiled)
     err = (a - b).abs().mean(1)[0].numpy()
@@ -133,3 +137,18 @@ def test_harmonize_tiled(restorer):
     np.testing.assert_array_equal(a, c)
     np.testing.assert_array_equal(a[~region], b[~region])
     assert np.abs(a - b)[region].max() <= TOL_HARMONIZE
+
+
+def test_a_noise_free_start_gives_what_the_mean_of_samples_converges_to(restorer):
+    """The shipped restorer's one noise-free evaluation lies closer to the mean of 64 noisy samples
+    than the mean of 8 does (measured: mean absolute difference 0.0020 against 0.0055; one
+    sample 0.0149), which is why it replaced the mean of 8 as the default at an eighth of the work."""
+    left, right, init = scene()
+    many = restore_image(restorer, left, right, init, SamplerConfig(steps=5, n_start=4, samples=64))
+
+    def gap(**kw) -> float:
+        return float((restore_image(restorer, left, right, init, SamplerConfig(steps=5, n_start=4, seed=5, **kw))
+                      - many).abs().mean())
+
+    noise_free, eight = gap(noise_free=True), gap(samples=8)
+    assert noise_free < 0.6 * eight and noise_free < 0.003, (noise_free, eight)

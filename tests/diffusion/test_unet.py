@@ -70,3 +70,20 @@ def test_checkpoints_without_an_output_field_predict_velocity():
     d = UNetConfig(width=8, mults=(1, 2)).to_json()
     del d["output"]
     assert UNetConfig.from_json(d).output == "v"
+
+
+def test_inference_in_channels_last_is_the_training_layouts_velocity():
+    """Evaluation runs NHWC (faster on the CPU), training NCHW: the same numbers to float32 rounding,
+    on the shipped guided network at an odd size (padding) with its guide."""
+    from symdrive_core.diffusion.defaults import GUIDED_WEIGHTS
+
+    net = load_builtin(GUIDED_WEIGHTS).net
+    g = torch.Generator().manual_seed(0)
+    z, left, right = (torch.rand(1, 3, 45, 70, generator=g) * 2 - 1 for _ in range(3))
+    guide = torch.rand(1, 4, 45, 70, generator=g) * 2 - 1
+    t = torch.full((1,), 0.2)
+    with torch.no_grad():
+        nhwc = net.eval()(z, t, left, right, guide)
+        nchw = net.train()(z, t, left, right, guide)
+    assert nhwc.is_contiguous() and nhwc.shape == z.shape
+    assert (nhwc - nchw).abs().max() <= 1e-4 * nchw.abs().max()

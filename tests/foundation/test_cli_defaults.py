@@ -71,7 +71,7 @@ def test_help_prints_the_config_value(command, flag, value):
 
 def test_restore_help_prints_each_backend_sampler():
     text = _help("restore")
-    for field in ("steps", "n_start", "samples"):
+    for field in ("steps", "n_start", "samples", "noise_free"):
         expected = ", ".join(f"{getattr(s, field)} {name}" for name, s in SAMPLERS.items())
         assert f"(default: {expected})" in text
 

@@ -80,7 +80,7 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
     assert row["ran"] and not row["reused"] and row["guided"] and row["steps"] == 2
     weights = out / row["weights"] / WEIGHTS
     assert weights.exists() and weights in loaded  # the restore stage loaded the adapted weights
-    assert next(s for s in report["stages"] if s["name"] == "restore")["method"] == "geo_ar_d0.5"
+    assert next(s for s in report["stages"] if s["name"] == "restore")["method"] == "geo_ar_d1.0"
 
     # another run key (the sampler's seed) clears the run's outputs, not the adapted restorer
     made = weights.stat().st_mtime_ns

@@ -15,7 +15,7 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     ran = {s["name"] for s in report["stages"] if s["ran"]}
     assert {"render", "restore", "harmonize", "finetune", "evaluate"} <= ran
     methods = {(r["offset_m"], r["method"]) for r in report["metrics"]["lateral"]}
-    assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (3.0, "geo_ar_d0.5"), (1.0, "single_view")} <= methods
+    assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (3.0, "geo_ar_d1.0"), (1.0, "single_view")} <= methods
     assert {r["method"] for r in report["metrics"]["insertion"]} == {
         "naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow"}
     assert len(list((out / "shadows").rglob("*.png"))) == 1  # the sunny street: the window's frame 12 has a car
@@ -36,6 +36,6 @@ def test_full_demo_end_to_end(tmp_path):
     ran = {s["name"] for s in report["stages"] if s["ran"]}
     assert {"render", "restore", "refine", "harmonize", "finetune", "evaluate"} <= ran
     rows = report["metrics"]["lateral"]
-    assert {r["method"] for r in rows} >= {"raw_3dgs", "single_view", "ar_d0.5", "geo_ar_d0.5", "refined"}
+    assert {r["method"] for r in rows} >= {"raw_3dgs", "single_view", "ar_d0.5", "geo_ar_d1.0", "refined"}
     assert {r["offset_m"] for r in rows if r["method"] == "refined"} == {-3.0, -2.0, -1.5, -1.0, -0.5,
                                                                          0.5, 1.0, 1.5, 2.0, 3.0}
