@@ -132,6 +132,9 @@ def main(argv=None) -> int:
     p.add_argument("--compare", action="store_true",
                    help="also run the previous default restoration (guided d = 0.5 m, mean of 8 samples) and "
                         "print the ratios")
+    p.add_argument("--device", default="cpu",
+                   help="torch device of rendering and the restorer (cpu, cuda, cuda:N); the fine-tune runs on "
+                        "the CPU kernels")
     p.add_argument("--quiet", action="store_true")
     args = p.parse_args(argv)
     width = args.width or (960 if args.quick else 1920)
@@ -166,14 +169,15 @@ def main(argv=None) -> int:
     finally:
         if tmp is not None:
             tmp.cleanup()
-    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), max memory {opts.sampler.max_memory_gib} GiB,"
-          f" package built in {build_s:.1f} s")
+    print(f"{width}x{height}, {gaussians:,} Gaussians, {frames} frame(s), {args.device}, max memory "
+          f"{opts.sampler.max_memory_gib} GiB, package built in {build_s:.1f} s")
     for name, r in results.items():
         print(f"{name} ({r['method']}, {r['sampler']}):")
         for stage, sec in r["seconds_per_frame"].items():
             print(f"  {stage:<10} {sec:8.2f} s/frame")
+        gpu = f", peak GPU memory {r['peak_gpu_gib']} GiB" if "peak_gpu_gib" in r else ""
         print(f"  frame      {r['frame_seconds']:8.2f} s, total run {r['run_seconds']:.1f} s, "
-              f"peak RSS {r['peak_rss_gib']} GiB")
+              f"peak RSS {r['peak_rss_gib']} GiB{gpu}")
     if args.compare:
         new, old = results["default"], results["previous"]
         ratios = {"restore": old["seconds_per_frame"]["restore"] / new["seconds_per_frame"]["restore"],
@@ -182,6 +186,7 @@ def main(argv=None) -> int:
         results["ratios"] = {k: round(v, 2) for k, v in ratios.items()}
     if args.json:
         args.json.write_text(json.dumps({"width": width, "height": height, "gaussians": gaussians, "frames": frames,
+                                         "device": args.device,
                                          "max_memory_gib": opts.sampler.max_memory_gib,
                                          "build_seconds": round(build_s, 1), **results}, indent=1) + "\n")
     return 0
@@ -194,22 +199,28 @@ def run_once(root: Path, name: str, opts, args, frames: int) -> dict:
     """One ``run_scene`` of the package with ``opts`` into its own folder. The restorer's
     adaptation to the drive is off: it is paid once per drive, not per frame. The peak RSS is the
     process's so far (the runs go in turn, the default first)."""
+    import torch
+
     from symdrive_core.pipeline.plan import PlanOptions
     from symdrive_core.pipeline.run import run_scene
 
+    cuda = args.device.startswith("cuda")
+    if cuda:
+        torch.cuda.reset_peak_memory_stats(args.device)
     t0 = time.perf_counter()
     report = run_scene(root / "package", root / f"out-{name}", options=PlanOptions(refine=args.refine_iters > 0,
                                                                                    adapt=False),
-                       progress=not args.quiet, stage_options=opts)
+                       device=args.device, progress=not args.quiet, stage_options=opts)
     total = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kilobytes
+    gpu = {"peak_gpu_gib": round(torch.cuda.max_memory_allocated(args.device) / 2**30, 2)} if cuda else {}
     ran = [s for s in report["stages"] if s.get("ran") and "seconds" in s]
     stages = {s["name"]: round(s["seconds"] / frames, 2) for s in ran}
     restore = next((s for s in ran if s["name"] == "restore"), {})
     return {"method": restore.get("method"), "sampler": "noise-free" if opts.sampler.noise_free else
             f"mean of {opts.sampler.samples}", "run_seconds": round(total, 1), "seconds_per_frame": stages,
             "frame_seconds": round(sum(v for k, v in stages.items() if k in PER_FRAME), 2),
-            "peak_rss_gib": round(peak / 2**30, 2)}
+            "peak_rss_gib": round(peak / 2**30, 2), **gpu}
 
 
 if __name__ == "__main__":

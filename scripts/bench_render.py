@@ -208,7 +208,7 @@ def bench_baseline(n, res, results, repeat=3):
 FIRST_FRAME = """
 import time
 t0 = time.perf_counter()
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
+from symdrive_core.world.demo import DEMO_PACKAGE
 from symdrive_core.pipeline.preview import preview_manifest
 from symdrive_core.pipeline.scene_render import SceneRenderer
 from symdrive_core.scene import load_manifest

@@ -12,7 +12,9 @@ difference per scene is printed with a pass mark at ``--tolerance``. Gradients: 
 gradient of a random linear loss against central differences of the oracle, for the means,
 colours and opacities of a small scene. Speed: forward and forward+backward of a 1M-Gaussian
 1280x720 street-like scene (``bench_render.make_scene``), the backend under test next to the CPU
-kernels (same process). Exit status 1 when a check fails, 0 otherwise (3 without CUDA).
+kernels (same process). The restorer: the pipeline's restoration on the device against the CPU's,
+and one network evaluation's time on each. Exit status 1 when a check fails, 0 otherwise (3
+without CUDA).
 """
 
 from __future__ import annotations
@@ -144,6 +146,50 @@ def speed(backend, device, n, width, height):
     return out
 
 
+def restorer_check(device, quick: bool, tolerance_levels: float = 1.0) -> tuple[dict, bool]:
+    """The pipeline's restoration on ``device`` against the CPU's: one noise-free guided-chain
+    evaluation of a street-like frame (the image's largest difference in 8-bit levels; convolutions
+    on CUDA may use TF32), and the seconds of one evaluation at 1920x1080 (960x540 with
+    ``quick``) on each."""
+    from bench_restorer_cpu import inputs
+
+    from symdrive_core.diffusion.config import SAMPLERS
+    from symdrive_core.diffusion.models import load_restorer
+    from symdrive_core.diffusion.sampler import restore_image
+
+    restorer = load_restorer().guided
+    z, _, left, right, guide = inputs(256, 144, restorer.guide_channels)
+    images = [(x * 0.5 + 0.5).clamp(0, 1) for x in (left, right, z / 0.8)]
+    guide01 = guide * 0.5 + 0.5
+
+    def restored(dev):
+        restorer.to(dev)
+        return restore_image(restorer, *images, SAMPLERS["builtin"], guide01)
+
+    cpu_image = restored("cpu")
+    diff = float((restored(device) - cpu_image).abs().max()) * 255
+    w, h = (960, 540) if quick else (1920, 1080)
+    big = inputs(w, h, restorer.guide_channels)
+    seconds = {}
+    for dev in dict.fromkeys(("cpu", str(device))):
+        restorer.to(dev)
+        args = [a.to(dev) for a in big]
+        with torch.no_grad():
+            restorer.net(*args)  # warm-up
+            if dev.startswith("cuda"):
+                torch.cuda.synchronize()
+            t0 = time.perf_counter()
+            restorer.net(*args)
+            if dev.startswith("cuda"):
+                torch.cuda.synchronize()
+            seconds[dev] = round(time.perf_counter() - t0, 4)
+    restorer.to("cpu")
+    ok = diff <= tolerance_levels
+    print(f"restorer on {device}: max difference from the CPU {diff:.3f} levels ({'pass' if ok else 'FAIL'}); "
+          f"one evaluation at {w}x{h}: " + ", ".join(f"{d} {t:.3f} s" for d, t in seconds.items()))
+    return {"max_diff_levels": round(diff, 4), "size": [w, h], "seconds": seconds}, ok
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--backend", choices=["gsplat", "numba", "torch"], default="gsplat",
@@ -169,9 +215,11 @@ def main(argv=None) -> int:
     grads, ok_g = gradients(args.backend, device, args.tolerance)
     n, w, h = (100_000, 640, 360) if args.quick else (1_000_000, 1280, 720)
     timings = speed(args.backend, device, n, w, h)
+    restoration, ok_r = restorer_check(device, args.quick)
     result = {"backend": args.backend, "device": str(device),
               "gpu": torch.cuda.get_device_name(0) if device.type == "cuda" else None,
-              "agreement": agree, "gradients": grads, "speed": timings, "pass": ok_a and ok_g}
+              "agreement": agree, "gradients": grads, "speed": timings, "restorer": restoration,
+              "pass": ok_a and ok_g and ok_r}
     if args.json:
         with open(args.json, "w") as f:
             json.dump(result, f, indent=1)

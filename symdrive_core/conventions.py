@@ -41,6 +41,20 @@ VEHICLE_LEFT = np.array([0.0, 1.0, 0.0])
 VEHICLE_UP = np.array([0.0, 0.0, 1.0])
 
 
+MIN_SUN_ELEVATION_SIN = 1e-3  # a sun lower than this (sine of its elevation) grazes the ground: no ground shadow
+
+
+def sun_above_horizon(sun_direction) -> np.ndarray | None:
+    """The unit direction sunlight travels, or None when it travels upwards or grazes the ground
+    (no ground shadow then). A zero or non-finite vector is an error."""
+    s = np.asarray(sun_direction, dtype=np.float64)
+    n = float(np.linalg.norm(s))
+    if not np.isfinite(n) or n == 0.0:
+        raise ValueError("sun_direction must be a finite non-zero vector")
+    s = s / n
+    return None if float(s @ WORLD_UP) > -MIN_SUN_ELEVATION_SIN else s
+
+
 def blender_camera_to_opencv(c2w_blender: np.ndarray) -> np.ndarray:
     """Camera-to-world of a Blender camera object -> OpenCV camera-to-world (Y and Z flipped)."""
     c2w = np.array(c2w_blender, dtype=np.float64, copy=True)

@@ -161,8 +161,8 @@ def _batch(args) -> int:
 def _accuracy_time(args) -> int:
     from ..bench.accuracy_time import format_table, run_settings, write_outputs
     from ..bench.knobs import WHY_DEFAULTS, package_settings
-    from ..pipeline.demo import DEMO_PACKAGE
     from ..scene import load_manifest
+    from ..world.demo import DEMO_PACKAGE
 
     manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)
     settings, skipped = package_settings(manifest, quick=args.quick)
@@ -177,7 +177,7 @@ def _accuracy_time(args) -> int:
 
 
 def _demo(args) -> int:
-    from ..pipeline.demo import run_demo
+    from ..world.demo import run_demo
 
     report = run_demo(args.out, quick=args.quick, progress=not args.quiet, force=args.force)
     print(f"demo finished in {report['demo_seconds']} s: {args.out}/report.md, {args.out}/report.json")

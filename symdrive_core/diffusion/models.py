@@ -47,7 +47,20 @@ class BuiltinRestorer:
         return guide * 2.0 - 1.0
 
     def velocity(self, z_t, t, cond_left, cond_right, guide=None) -> torch.Tensor:
-        return self.net(z_t, t, cond_left, cond_right, guide)
+        """On the network's device (see :meth:`to`); the result on ``z_t``'s, where the sampler
+        keeps its state."""
+        device = self.net.inp.weight.device
+        if z_t.device == device:
+            return self.net(z_t, t, cond_left, cond_right, guide)
+        inputs = [None if x is None else x.to(device) for x in (z_t, t, cond_left, cond_right, guide)]
+        return self.net(*inputs).to(z_t.device)
+
+    def to(self, device) -> BuiltinRestorer:
+        """The network (and its guided sibling's) on ``device`` (``cpu``, ``cuda``...)."""
+        self.net.to(device)
+        if self.guided is not None:
+            self.guided.to(device)
+        return self
 
     def parameters(self):
         return self.net.parameters()

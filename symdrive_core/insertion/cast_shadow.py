@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from .. import conventions
-from ..conventions import linear_to_srgb, srgb_to_linear
+from ..conventions import linear_to_srgb, srgb_to_linear, sun_above_horizon
 from ..gaussians import Gaussians
 from ..scene import Pose
 from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
@@ -29,7 +29,7 @@ from ..splat.frozen_view import FrozenView
 from ..splat.projection import quat_to_rotmat
 from ..splat.rasterizer import RasterizePixels, bin_gaussians
 from .place import place
-from .shadow import ground_hits, shadow_polygon, sun_above_horizon, vehicle_ground_z
+from .shadow import ground_hits, shadow_polygon, vehicle_ground_z
 
 MAP_MAX_PIXELS = 1024  # longest side of the shadow map
 MAP_MIN_CELL_M = 0.01

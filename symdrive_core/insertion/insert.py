@@ -54,12 +54,12 @@ def insert_frame(manifest: Manifest, background, vehicle: Gaussians, pose, wlh, 
     harmonization may change."""
     view = insertion_view(camera, background, vehicle, pose)
     rgb, alpha = view.render_numpy(vehicle)
-    eff = manifest.effects
+    sun, _ = manifest.effects.casting_sun()
     region, cast = None, None
-    if eff.shadows and eff.sun_direction is not None:
-        region = shadow_region(pose, wlh, eff.sun_direction, camera.camera_to_world, camera.K, camera.width,
+    if sun is not None:
+        region = shadow_region(pose, wlh, sun, camera.camera_to_world, camera.K, camera.width,
                                camera.height, dilate_px=shadow_px)
-        cast = vehicle_shadow(view, vehicle, pose, wlh, eff.sun_direction, eff.shade)
+        cast = vehicle_shadow(view, vehicle, pose, wlh, sun, manifest.effects.shade)
     image = rgb if cast is None else cast.apply(rgb, alpha)
     return InsertedFrame(image, rgb, alpha, harmonization_region(alpha, region), view, pose, cast)
 

@@ -13,10 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from .. import conventions
+from ..conventions import sun_above_horizon
 from ..scene import Pose
 from ..splat.constants import ALPHA_THRESHOLD
-
-MIN_SUN_ELEVATION_SIN = 1e-3
 
 
 def convex_hull(points: np.ndarray) -> np.ndarray:
@@ -38,17 +37,6 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
             upper.pop()
         upper.append(p)
     return np.asarray(lower[:-1] + upper[:-1], dtype=np.float64)
-
-
-def sun_above_horizon(sun_direction) -> np.ndarray | None:
-    """The unit direction sunlight travels, or None when it travels upwards or grazes the ground
-    (no ground shadow then). A zero or non-finite vector is an error."""
-    s = np.asarray(sun_direction, dtype=np.float64)
-    n = float(np.linalg.norm(s))
-    if not np.isfinite(n) or n == 0.0:
-        raise ValueError("sun_direction must be a finite non-zero vector")
-    s = s / n
-    return None if s[2] > -MIN_SUN_ELEVATION_SIN else s
 
 
 def vehicle_ground_z(pose: Pose, wlh) -> float:

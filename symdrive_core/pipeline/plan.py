@@ -176,22 +176,15 @@ def _has_training_images(manifest: Manifest, cam) -> bool:
 
 def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
     """Inserted vehicles cast shadows where the scene has a sun (recorded ones carry theirs)."""
-    from ..insertion.shadow import sun_above_horizon
-
-    eff = manifest.effects
+    sun, why = manifest.effects.casting_sun()
     casters = {a.id for a in manifest.inserted_actors if a.wlh is not None}  # splats or mesh: all render
     frames = sorted({fi for cam in visible.values() for fi, ids in cam.items() if casters & set(ids)})
-    if eff.sun_direction is None:
-        return StageDecision("cast_shadow", False, "no sun in the scene")
-    if not eff.shadows:
-        return StageDecision("cast_shadow", False, "shadows off in the scene's effects")
-    if sun_above_horizon(eff.sun_direction) is None:
-        return StageDecision("cast_shadow", False, "sun at or below the horizon")
+    if sun is None:
+        return StageDecision("cast_shadow", False, why)
     if not frames:
         return StageDecision("cast_shadow", False, "no inserted vehicle (with a size) in any frame")
     seen = sorted({a for cam in visible.values() for fi in frames for a in cam.get(fi, []) if a in casters})
-    return StageDecision("cast_shadow", True, f"sun present: inserted vehicles cast shadows (shade keeps "
-                         f"{eff.shade:.2f} of the light)", frames, seen)
+    return StageDecision("cast_shadow", True, why, frames, seen)
 
 
 def _window(manifest: Manifest, frames: list[int] | None) -> list[int] | None:

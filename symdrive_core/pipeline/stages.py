@@ -105,8 +105,8 @@ def background(ctx):
 
 
 def restorer(ctx):
-    """The shipped restorer; where the plan adapts it, the adapted weights take the place of the
-    weights they were fine-tuned from (the guided ones, or the default)."""
+    """The shipped restorer on the run's device; where the plan adapts it, the adapted weights take
+    the place of the weights they were fine-tuned from (the guided ones, or the default)."""
     from ..diffusion.models import load_builtin, load_restorer
     from ..diffusion.train import WEIGHTS
 
@@ -118,6 +118,7 @@ def restorer(ctx):
                 ctx.shared.restorer.guided = adapted
             else:
                 ctx.shared.restorer = adapted
+        ctx.shared.restorer.to(ctx.device)
     return ctx.shared.restorer
 
 

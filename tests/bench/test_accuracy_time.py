@@ -9,8 +9,8 @@ from symdrive_core.bench.knobs import Budget, lane_iou, renderer_settings, shado
 from symdrive_core.cli import main
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import read_splats
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
+from symdrive_core.world.demo import DEMO_PACKAGE
 
 
 def test_pareto_marks_and_outputs(tmp_path):

@@ -17,8 +17,8 @@ from symdrive_core.diffusion.sampler import SamplerConfig, restore_image, to_num
 from symdrive_core.diffusion.train import WEIGHTS, TrainConfig, train_restorer
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import write_splats
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
+from symdrive_core.world.demo import DEMO_PACKAGE
 from tests.diffusion.test_data_train import synthetic_pairs
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 

@@ -63,3 +63,30 @@ def test_cast_shadow_matches_the_boxs_true_shadow(tmp_path):
     # over car and shadow together the car's light dominates; the shadow still adds
     assert rows["cast_shadow"]["masked_psnr"] > rows["naive"]["masked_psnr"] + 0.5
     assert rows["finetuned_shadow"]["masked_psnr"] > rows["finetuned"]["masked_psnr"] + 0.5
+
+
+def test_an_insertion_casts_a_shadow_exactly_where_the_plan_says(tmp_path):
+    """One rule (``Effects.casting_sun``) for the planner and every renderer of an insertion: a sun
+    at or below the horizon, or shadows off, give neither a cast shadow nor a shadow region."""
+    from dataclasses import replace
+
+    from symdrive_core.insertion.assets import load_vehicle_asset
+    from symdrive_core.insertion.insert import insert_frame
+    from symdrive_core.insertion.shadow import harmonization_region
+    from symdrive_core.pipeline.plan import make_plan
+    from symdrive_core.splat.tensors import GaussianTensors
+
+    path, bg = package.write_package(tmp_path / "pkg", sun=package.SUN)
+    manifest = load_manifest(path)
+    p = held_out_placements(manifest)[0]
+    car = load_vehicle_asset(manifest.resolve(p.asset)).gaussians
+    background = GaussianTensors.from_gaussians(bg)
+    low = replace(manifest.effects, sun_direction=np.array([1.0, 0.0, 0.0005]))
+    for effects, casts in ((manifest.effects, True), (replace(manifest.effects, shadows=False), False), (low, False)):
+        scene = replace(manifest, effects=effects)
+        frame = insert_frame(scene, background, car, p.pose, p.wlh, p.camera)
+        assert (frame.shadow is not None) == casts == (scene.effects.casting_sun()[0] is not None)
+        if not casts:  # harmonization may change the car alone
+            assert np.array_equal(frame.region, harmonization_region(frame.vehicle_alpha, None))
+        reason = make_plan(scene).stage("cast_shadow").reason
+        assert reason == scene.effects.casting_sun()[1] or (casts and "no inserted vehicle" in reason)

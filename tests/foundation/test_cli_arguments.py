@@ -8,7 +8,7 @@ import pytest
 
 from symdrive_core.cli import build_parser, frames_arg, main
 from symdrive_core.io.ply import write_splats
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
+from symdrive_core.world.demo import DEMO_PACKAGE
 from tests.conftest import random_gaussians
 
 PKG = str(DEMO_PACKAGE)

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from symdrive_core.cli import main
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
+from symdrive_core.world.demo import DEMO_PACKAGE
 
 
 def test_version(capsys):

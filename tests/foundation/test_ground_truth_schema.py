@@ -8,9 +8,9 @@ import jsonschema
 import pytest
 
 from symdrive_core.cli import main
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest, parse_manifest
 from symdrive_core.scene.manifest import SCHEMA_PATH, ManifestError
+from symdrive_core.world.demo import DEMO_PACKAGE
 from tests.conftest import manifest_dict
 
 SCHEMA = json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))

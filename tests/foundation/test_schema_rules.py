@@ -9,10 +9,10 @@ import re
 import pytest
 
 from symdrive_core.cli import main
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import parse_manifest
 from symdrive_core.scene.manifest import ManifestError
 from symdrive_core.scene.schema import field_path, manifest_schema
+from symdrive_core.world.demo import DEMO_PACKAGE
 from tests.conftest import manifest_dict
 from tests.foundation.test_ground_truth_schema import TRAFFIC_GT
 

@@ -13,11 +13,11 @@ from symdrive_core.diffusion import defaults, models
 from symdrive_core.diffusion.adapt import AdaptConfig, drive_identity
 from symdrive_core.diffusion.train import WEIGHTS
 from symdrive_core.io.ply import write_splats
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.pipeline.plan import PlanOptions, make_plan
 from symdrive_core.pipeline.run import run_scene
 from symdrive_core.pipeline.stages import StageOptions
 from symdrive_core.scene import load_manifest
+from symdrive_core.world.demo import DEMO_PACKAGE
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 

@@ -9,9 +9,9 @@ import pytest
 from symdrive_core.errors import InputError
 from symdrive_core.eval.lane_paint import lane_truth
 from symdrive_core.io.images import read_image
-from symdrive_core.pipeline.demo import DEMO_PACKAGE
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.ground_truth import lane_masks, lateral_views
+from symdrive_core.world.demo import DEMO_PACKAGE
 
 MANIFEST = load_manifest(DEMO_PACKAGE)
 RECORDED = [0, 7, 14, 21, 28]

@@ -15,10 +15,10 @@ import numpy as np
 from ..diffusion.config import RefineConfig
 from ..insertion.config import InsertionConfig
 from ..optim.config import FinetuneConfig
-from .lock import OutputLock
-from .outputs import OutputTree
-from .plan import PlanOptions
-from .stages import StageOptions
+from ..pipeline.lock import OutputLock
+from ..pipeline.outputs import OutputTree
+from ..pipeline.plan import PlanOptions
+from ..pipeline.stages import StageOptions
 
 DEMO_PACKAGE = Path(__file__).resolve().parent.parent / "data" / "demo_street"
 
@@ -145,12 +145,12 @@ def _run_demo(tree: OutputTree, options: tuple[PlanOptions, StageOptions], quick
     from ..io.atomic import write_text_atomic
     from ..io.images import read_image
     from ..io.ply import read_splats
+    from ..pipeline.report import write_report_json
+    from ..pipeline.run import run_scene
     from ..scene import load_manifest
     from ..scene.ground_truth import lateral_views
     from ..splat.render import SplatRenderer
     from ..splat.tensors import GaussianTensors
-    from .report import write_report_json
-    from .run import run_scene
 
     out = tree.root
     t0 = time.perf_counter()
