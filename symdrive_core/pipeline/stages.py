@@ -261,6 +261,7 @@ def restore_stage(ctx) -> StageResult:
 
 
 def chain_step(opts: StageOptions, guided: bool) -> float:
+    """The step d of the pipeline's chain, guided or not (each measured on its own)."""
     return opts.guided_ar_step if guided else opts.ar_step
 
 
