@@ -25,6 +25,7 @@ def test_the_checks_pass_on_the_cpu_kernels(tmp_path, capsys):
     assert result["pass"] and len(result["agreement"]) == 3 and len(result["gradients"]) == 3
     assert all(r["max_rgb_diff"] < 1e-4 for r in result["agreement"])
     assert result["speed"]["numba"]["forward_s"] > 0
+    assert result["restorer"]["max_diff_levels"] == 0.0 and result["restorer"]["seconds"]["cpu"] > 0
     assert "all checks pass" in capsys.readouterr().out
 
 
