@@ -2,18 +2,13 @@
 run; the option the toolkit keeps (channels-last) gives eager's image to far below an 8-bit level,
 and an option that cannot run is reported, not a crash."""
 
-import importlib.util
 import json
-from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench_restorer_cpu.py"
+from tests.scripts import load_script
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("bench_restorer_cpu", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench_restorer_cpu")
 
 
 def test_channels_last_gives_eagers_image_and_missing_runtimes_are_reported(tmp_path, monkeypatch):

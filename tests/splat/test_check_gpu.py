@@ -1,21 +1,16 @@
 """``scripts/check_gpu.py`` runs its checks end to end on the CPU kernels (the same code a GPU run
 takes), and says plainly when there is no CUDA device to check."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 import torch
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "check_gpu.py"
+from tests.scripts import load_script
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("check_gpu", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("check_gpu")
 
 
 def test_the_checks_pass_on_the_cpu_kernels(tmp_path, capsys):
