@@ -148,13 +148,13 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
                     "seconds": (time.perf_counter() - t0) / max(views, 1), "per": "view"}
         return run
 
-    d = chain_method(DEFAULTS, guided=warper is not None)
+    unguided, guided = chain_method(DEFAULTS, guided=False), chain_method(DEFAULTS, guided=True)
+    d = guided if warper is not None else unguided  # the pipeline's chain on this package
     s, n, k = DEFAULTS.sampler.steps, DEFAULTS.sampler.n_start, DEFAULTS.sampler.samples
     t_start = 1.0 - n / s  # every sampler-steps setting starts at the default's noise level
     steps = dict.fromkeys((s, 10, 20, 50))
     noise = {"noise-free, one evaluation": {"noise_free": True}, "1 noisy sample": {"noise_free": False, "samples": 1},
              **{f"mean of {j} noisy samples": {"noise_free": False, "samples": j} for j in dict.fromkeys((4, k))}}
-    unguided, guided = chain_method(DEFAULTS, guided=False), chain_method(DEFAULTS, guided=True)
 
     def step_label(method: str) -> str:
         method = method.removeprefix("geo_")

@@ -7,10 +7,6 @@ import json
 from tests.scripts import load_script
 
 
-def _script():
-    return load_script("bench_restorer_cpu")
-
-
 def test_channels_last_gives_eagers_image_and_missing_runtimes_are_reported(tmp_path, monkeypatch):
     import builtins
 
@@ -23,7 +19,7 @@ def test_channels_last_gives_eagers_image_and_missing_runtimes_are_reported(tmp_
 
     monkeypatch.setattr(builtins, "__import__", no_openvino)
     out = tmp_path / "bench.json"
-    assert _script().main(["--width", "72", "--height", "40", "--threads", "1", "--repeat", "1",
+    assert load_script("bench_restorer_cpu").main(["--width", "72", "--height", "40", "--threads", "1", "--repeat", "1",
                            "--only", "channels_last,openvino", "--json", str(out)]) == 0
     rows = {r["option"]: r for r in json.loads(out.read_text())["rows"]}
     assert rows["eager"]["speedup"] == 1.0 and rows["eager"]["max_diff_levels"] == 0.0
