@@ -28,6 +28,7 @@ def _classes():
         import_splats,
         import_vehicle,
         preview,
+        recorded_vehicles,
         trajectory,
     )
 
@@ -43,6 +44,9 @@ def _classes():
         trajectory.SYMDRIVE_OT_import_sumo_fcd,
         cameras.SYMDRIVE_OT_import_camera_rig,
         import_drive.SYMDRIVE_OT_import_drive,
+        recorded_vehicles.SYMDRIVE_OT_import_recorded_vehicles,
+        recorded_vehicles.SYMDRIVE_OT_remove_vehicle,
+        recorded_vehicles.SYMDRIVE_OT_shift_vehicle_keys,
         export_scene.SYMDRIVE_OT_export_scene,
         preview.SYMDRIVE_OT_render_preview,
         *panels.panels,

@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from . import actors, camera_math, core, masks, quiet, reference_frame
+from . import actors, camera_math, core, masks, quiet, recorded, reference_frame
 from .core import atomic, conventions, errors
 from .core import scene as scene_pkg
 
@@ -92,7 +92,7 @@ def _collect_actors(scene) -> list[_Actor]:
         splat_obj = actors.splat_asset(root)
         splats = bpy.path.abspath(splat_obj.symdrive.ply_path) if splat_obj else None
         mesh = bpy.path.abspath(s.mesh_path) if s.mesh_path else None
-        if splats is None and mesh is None:
+        if splats is None and mesh is None and not _awaits_reconstruction(root):
             raise errors.InputError(root.name, "actor has neither a splat cloud nor a mesh file", "assets")
         for path in (splats, mesh):
             if path and not os.path.isfile(path):
@@ -104,6 +104,11 @@ def _collect_actors(scene) -> list[_Actor]:
             scene.name, f"actor instance ids must be distinct and >= 1, got {ids}", "instance_id"
         )
     return out
+
+
+def _awaits_reconstruction(root: bpy.types.Object) -> bool:
+    """An existing actor without assets yet: exported with its size, the backend fits it in its box."""
+    return root.symdrive.kind == "existing" and min(root.symdrive.wlh) > 0
 
 
 def _sun_direction(scene, bg_inv: Matrix) -> np.ndarray | None:
@@ -127,7 +132,9 @@ def _check_rigid(ob: bpy.types.Object, M: Matrix) -> None:
 
 
 class _AssetPaths:
-    """Manifest paths for asset files: relative to the package, or copied into ``assets/``."""
+    """Manifest paths for asset files: relative to the package, or copied into ``assets/``. A file
+    of the package being replaced (re-exporting an imported package into its own folder) is carried
+    into the new one under the path the package gave it."""
 
     def __init__(self, final_dir: Path, work_dir: Path, copy: bool):
         self.final_dir, self.work_dir, self.copy, self.done = final_dir, work_dir, copy, {}
@@ -136,7 +143,11 @@ class _AssetPaths:
         if path is None:
             return None
         if path not in self.done:
-            if self.copy:
+            inside = _inside(path, self.final_dir)
+            if inside is not None:
+                _carry(Path(path), self.work_dir / inside)
+                self.done[path] = inside.as_posix()
+            elif self.copy:
                 target = self.work_dir / "assets" / f"{len(self.done):02d}_{Path(path).name}"
                 target.parent.mkdir(exist_ok=True)
                 shutil.copy2(path, target)
@@ -147,6 +158,23 @@ class _AssetPaths:
                 except ValueError:  # another drive: keep it absolute
                     self.done[path] = Path(path).as_posix()
         return self.done[path]
+
+
+def _inside(path: str, folder: Path) -> Path | None:
+    """``path`` relative to ``folder`` when it lies inside it, else None."""
+    try:
+        return Path(os.path.realpath(path)).relative_to(folder)
+    except ValueError:
+        return None
+
+
+def _carry(source: Path, target: Path) -> None:
+    """A hard link where the file system allows (no copy of a large PLY), else a copy."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copy2(source, target)
 
 
 def _frame_range(scene, options: ExportOptions) -> list[int]:
@@ -220,7 +248,7 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                         progress(i + 1, len(frame_numbers))
             asset = _AssetPaths(out, work, options.copy_assets)
             for a in actor_list:
-                if a.splats is None:  # mesh-only: the backend gets the geometry as Blender shows it
+                if a.splats is None and a.mesh is not None:  # mesh-only: the geometry as Blender shows it
                     a.mesh_in_package = write_actor_glb(a.root, work)
             inserted = any(a.root.symdrive.kind == "inserted" for a in actor_list)
             sun = _sun_direction(scene, bg_inv)
@@ -231,7 +259,7 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                     scene_pkg.Frame(i, (f - frame_numbers[0]) / fps) for i, f in enumerate(frame_numbers)
                 ],
                 cameras=[scene_pkg.Camera(cam.name, width, height, cam_frames[cam]) for cam in cameras],
-                actors=[_manifest_actor(a, poses[a.root], asset) for a in actor_list],
+                actors=[_manifest_actor(a, poses[a.root], asset, frame_numbers) for a in actor_list],
                 background_splats=asset(_background_ply(scene)),
                 masks=mask_entries,
                 id_maps=id_maps,
@@ -254,9 +282,14 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
     return scene_pkg.load_manifest(out / "manifest.json", allow_external=not options.copy_assets)
 
 
-def _manifest_actor(a: _Actor, poses, asset: _AssetPaths) -> scene_pkg.Actor:
+def _manifest_actor(a: _Actor, poses, asset: _AssetPaths, frame_numbers) -> scene_pkg.Actor:
     s = a.root.symdrive
     wlh = np.array(s.wlh) if min(s.wlh) > 0 else None
+    recorded_poses = None
+    if s.kind == "existing" and s.recorded_poses:
+        poses, recorded_poses = recorded.against_recorded(
+            poses, recorded.at_frames(s.recorded_poses, frame_numbers)
+        )
     return scene_pkg.Actor(
         id=s.actor_id,
         kind=s.kind,
@@ -265,6 +298,7 @@ def _manifest_actor(a: _Actor, poses, asset: _AssetPaths) -> scene_pkg.Actor:
         poses=poses,
         wlh=wlh,
         instance_id=s.instance_id,
+        recorded_poses=recorded_poses,
     )
 
 

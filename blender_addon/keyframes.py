@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Quaternion
 
-from . import reference_frame
+from . import compat, reference_frame
 
 
 @contextlib.contextmanager
@@ -51,6 +51,30 @@ def key_presence(obj: bpy.types.Object, frame_numbers, present) -> None:
         for ob in targets:
             ob.hide_render = not here
             ob.keyframe_insert("hide_render", frame=int(f))
+
+
+def shift_keys(obj: bpy.types.Object, frames: float) -> None:
+    """Move every key of ``obj`` and of its parts ``frames`` later (earlier when negative): a retime
+    that keeps the track's shape, its presence keys included (they are keyed on the parts too)."""
+    for ob in (obj, *obj.children_recursive):
+        for fc in compat.object_fcurves(ob):
+            for k in fc.keyframe_points:
+                k.co.x += frames
+                k.handle_left.x += frames
+                k.handle_right.x += frames
+            fc.update()
+
+
+def disable_in_renders(obj: bpy.types.Object) -> None:
+    """Disable ``obj`` and its parts in renders at every frame: keyed presence is set to hidden at
+    each key too, or the next frame change would bring the vehicle back."""
+    for ob in (obj, *obj.children_recursive):
+        ob.hide_render = True
+        for fc in compat.object_fcurves(ob):
+            if fc.data_path == "hide_render":
+                for k in fc.keyframe_points:
+                    k.co.y = 1.0
+                fc.update()
 
 
 def key_world_poses(obj: bpy.types.Object, frame_numbers, world_matrices) -> None:

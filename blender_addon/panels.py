@@ -27,6 +27,7 @@ class SYMDRIVE_PT_main(_Sidebar, bpy.types.Panel):
         col.operator("symdrive.import_vehicle", icon="AUTO")
         col.operator("symdrive.import_camera_rig", icon="CAMERA_DATA")
         col.operator("symdrive.import_drive", icon="FILE_MOVIE")
+        col.operator("symdrive.import_recorded_vehicles", icon="AUTO")
         layout.prop(settings, "background")
         layout.operator("symdrive.render_preview", icon="RENDER_STILL")
 
@@ -57,6 +58,11 @@ class SYMDRIVE_PT_object(_Sidebar, bpy.types.Panel):
                 layout.label(text=f"Not car-sized: {problem}", icon="ERROR")
             layout.operator("symdrive.fit_vehicle_size", icon="FULLSCREEN_ENTER")
             layout.label(text=f"Instance id {s.instance_id}, ground offset {s.ground_offset:.3f} m")
+            if s.recorded_poses:
+                layout.label(text="Recorded vehicle: changes export as edits of its track", icon="INFO")
+            row = layout.row(align=True)
+            row.operator("symdrive.remove_vehicle", icon="HIDE_ON")
+            row.operator("symdrive.shift_vehicle_keys", icon="TIME")
         elif ob.symdrive.role == "SPLATS":
             s = ob.symdrive
             layout.label(text=f"{s.splat_count} splats, SH degree {s.sh_degree}")
@@ -109,6 +115,7 @@ def menu_import(self, context):
     self.layout.operator("symdrive.import_splats", text="3DGS Splats (.ply)")
     self.layout.operator("symdrive.import_vehicle", text="SymDrive Vehicle (.obj/.ply/.glb)")
     self.layout.operator("symdrive.import_drive", text="Recorded Drive (COLMAP / nerfstudio / 3DGS)")
+    self.layout.operator("symdrive.import_recorded_vehicles", text="Recorded Vehicles (SymDrive package)")
 
 
 def menu_export(self, context):

@@ -61,6 +61,12 @@ class SymDriveObjectSettings(bpy.types.PropertyGroup):
         default=False, options={"HIDDEN"}, description="Whether the children currently carry the flip"
     )
     mesh_path: StringProperty(name="Mesh file", subtype="FILE_PATH")
+    recorded_poses: StringProperty(
+        name="Recorded poses",
+        options={"HIDDEN"},
+        description="An existing actor's track as the drive recorded it (JSON, see recorded.py): "
+        "export compares its poses with it",
+    )
     # cameras
     export: BoolProperty(name="Export", default=True, description="Export this camera in scene packages")
 

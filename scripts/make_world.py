@@ -2,13 +2,17 @@
 
 Run with a Python that has the ``bpy`` wheel (the project venv does):
 
-    python scripts/make_world.py --out out/street --seed 0 [--overcast] [--frames 30]
+    python scripts/make_world.py --out out/street --seed 0 [--overcast] [--frames 30] [--traffic 5]
 
 The package holds the training drive (images, z-depth, OpenCV cameras), the same frames
 shifted sideways by +/-0.5 .. 3 m, held-out vehicle insertions (with / without / mask /
 shadow mask), a coloured point cloud of the scene surfaces, and three vehicle assets in the
-3DRealCar layout. ``ground_truth`` in ``manifest.json`` indexes all of it (see
-``symdrive_core.scene.ground_truth``). Same seed and settings give the same scene and cameras.
+3DRealCar layout. With ``--traffic N``, N vehicles drive in both directions while the ego
+records (``world.traffic``): they are existing actors with their exact poses, each drive frame
+has a mask of their visible pixels, and each held-out frame where one shows enough is rendered
+again with it removed, moved one lane across and 0.5 s later. ``ground_truth`` in
+``manifest.json`` indexes all of it (see ``symdrive_core.scene.ground_truth``). Same seed and
+settings give the same scene and cameras; ``--traffic 0`` is the street without traffic.
 """
 
 from __future__ import annotations
@@ -41,6 +45,11 @@ def parse_args(argv=None):
     p.add_argument("--placements", type=int, default=3, help="held-out vehicle insertions")
     p.add_argument("--points", type=int, default=60000, help="points in the initial point cloud (at most)")
     p.add_argument("--asset-splats", type=int, default=12000, help="splats per vehicle asset")
+    p.add_argument("--traffic", type=int, default=0,
+                   help="moving vehicles driving while the ego records (existing actors, with exact truth for "
+                        "removing, moving and retiming them on held-out frames)")
+    p.add_argument("--edit-pixels", type=int, default=200,
+                   help="least visible pixels of a traffic car for a held-out frame's edit truth")
     p.add_argument("--save-blend", action="store_true", help="also save world.blend in the package")
     return p.parse_args(argv)
 

@@ -11,6 +11,9 @@ Layout (paths relative to the package):
     gt/insertion/00/with.png     vehicle placed in the scene (true light and shadow)
     gt/insertion/00/mask.png     its visible mask (object-index pass, exact)
     gt/insertion/00/shadow.png   its hard-shadow region (sunny scenes only)
+    gt/vehicles/000000.png       the moving traffic's visible pixels in a drive frame (--traffic)
+    gt/edits/00/image.png        a held-out frame with one traffic car removed, moved or retimed
+    gt/edits/00/mask.png         that car's visible mask (edited render; for remove, the recorded one)
     background/points.ply        surface samples coloured from the training images
     assets/<kind>/{mesh.obj, mesh.mtl, splats.ply, wlh.json}
 """
@@ -35,6 +38,7 @@ from .assets import export_car
 from .insertion import place_object, placement_pose, shadow_mask
 from .meshdata import scene_triangles
 from .street import LANE_WIDTH, LANES, build_street
+from .traffic import EDIT_KINDS, RETIME_S, TRAFFIC_INDEX, Traffic, ego_vehicle
 from .vehicles import ASSET_PAINTS, PRESETS, build_car
 
 SPEED = 10.0  # m/s of the ego car: timestamps = distance / speed
@@ -65,6 +69,12 @@ class PackageWriter:
         self.insertions: list[dict] = []
         self.render_seconds: list[float] = []
         self.assets = self._make_assets()
+        self.traffic = Traffic(self.street, args.traffic, args.seed, [self._time(i) for i in range(args.frames)],
+                               ego_vehicle(SPEED)) if args.traffic else None
+        self.vehicle_masks: dict[int, str] = {}
+        self.vehicle_pixels: dict[int, np.ndarray] = {}  # frame -> visible pixels of each traffic car
+        self.heldout_index: dict[int, np.ndarray] = {}  # held-out frame -> its object-index pass
+        self.edits: list[dict] = []
 
     # ------------------------------------------------------------------ assets and renders
     def _make_assets(self) -> dict:
@@ -80,7 +90,13 @@ class PackageWriter:
             out[kind] = (obj, info)
         return out
 
-    def _render(self, c2w):
+    def _time(self, frame: int) -> float:
+        return frame * self.args.spacing / SPEED
+
+    def _render(self, c2w, frame: int, edited: dict | None = None):
+        """Cycles render of ``c2w`` with the traffic as at ``frame`` (``edited``: see Traffic.show)."""
+        if self.traffic is not None:
+            self.traffic.show(frame, edited)
         t = time.perf_counter()
         out = render.render(self.cam, c2w)
         self.render_seconds.append(time.perf_counter() - t)
@@ -95,14 +111,28 @@ class PackageWriter:
         kinds = sorted(self.assets)
         jobs += [lambda k=k: self._insert(k, frames[k % len(frames)], kinds[k % len(kinds)])
                  for k in range(self.args.placements)]
+        if self.traffic is not None:
+            jobs += [lambda f=f, kind=kind: self._edit(f, kind) for f in self.heldout for kind in EDIT_KINDS]
         return jobs
 
     def _train(self, i: int) -> None:
-        out = self._render(self.poses[i])
+        out = self._render(self.poses[i], i)
         write_image(self.root / f"gt/train/{i:06d}.png", out["rgb"])
         write_image(self.root / f"gt/depth/{i:06d}.exr", out["depth"], dtype="float")
         self.train_images[i], self.train_depths[i] = out["rgb"], out["depth"]
+        if self.traffic is not None:
+            self._vehicle_mask(i, out["index"])
         self.lanes_recorded[i] = self._lane_mask(self.poses[i], lanes.recorded_path(i))
+
+    def _vehicle_mask(self, i: int, index: np.ndarray) -> None:
+        """The traffic's visible pixels in drive frame ``i``, and each car's count (edits pick by it)."""
+        rel = f"gt/vehicles/{i:06d}.png"
+        write_mask(self.root / rel, index >= TRAFFIC_INDEX)
+        self.vehicle_masks[i] = rel
+        self.vehicle_pixels[i] = np.bincount(index.ravel(), minlength=TRAFFIC_INDEX + len(self.traffic))[
+            TRAFFIC_INDEX:TRAFFIC_INDEX + len(self.traffic)]
+        if i in self.heldout:
+            self.heldout_index[i] = index
 
     def _lane_mask(self, c2w, rel: str) -> str:
         write_mask(self.root / rel, lanes.lane_mask(self.cam, c2w))
@@ -110,7 +140,7 @@ class PackageWriter:
 
     def _lateral(self, i: int, offset: float) -> None:
         c2w = conventions.lateral_shift(self.poses[i], offset)
-        out = self._render(c2w)
+        out = self._render(c2w, i)
         rel = f"gt/lateral/{lateral_dir(offset)}/{i:06d}.png"
         write_image(self.root / rel, out["rgb"])
         self.lateral.setdefault(offset, {})[str(i)] = rel
@@ -123,7 +153,7 @@ class PackageWriter:
         place_object(obj, pose)
         obj.hide_render = False
         try:
-            out = self._render(self.poses[frame])
+            out = self._render(self.poses[frame], frame)
             mask = out["index"] == INSERT_INDEX
             shadow = None
             if self.street.sun_direction is not None:
@@ -143,6 +173,36 @@ class PackageWriter:
             "mask": f"{base}/mask.png", "shadow_mask": None if shadow is None else f"{base}/shadow.png",
             "mask_pixels": int(mask.sum()), "shadow_pixels": 0 if shadow is None else int(shadow.sum()),
         })
+
+    def _edit(self, frame: int, kind: str) -> None:
+        """Held-out ``frame`` rendered again with its most visible traffic car (if it shows at least
+        ``--edit-pixels``) removed, moved one lane across, or where it is RETIME_S later. An edit that
+        would put the car on another or off the street is skipped."""
+        pixels = self.vehicle_pixels[frame]
+        k = int(np.argmax(pixels))
+        if pixels[k] < self.args.edit_pixels:
+            return
+        extra = {}
+        if kind == "remove":
+            pose = None
+        elif kind == "move":
+            moved = self.traffic.moved(k, frame)
+            if moved is None:
+                return
+            pose, extra["lateral_m"] = moved
+        else:
+            pose = self.traffic.retimed(k, frame, RETIME_S)
+            if pose is None:
+                return
+            extra["shift_s"] = RETIME_S
+        out = self._render(self.poses[frame], frame, {k: pose})
+        mask = (self.heldout_index[frame] if pose is None else out["index"]) == TRAFFIC_INDEX + k
+        base = f"gt/edits/{len(self.edits):02d}"
+        write_image(self.root / f"{base}/image.png", out["rgb"])
+        write_mask(self.root / f"{base}/mask.png", mask)
+        self.edits.append({"kind": kind, "actor": f"car_{k}", "camera": "front", "frame": frame,
+                           "image": f"{base}/image.png", "mask": f"{base}/mask.png",
+                           "pose": None if pose is None else pose.to_json(), **extra, "mask_pixels": int(mask.sum())})
 
     # ------------------------------------------------------------------ point cloud, manifest
     def _point_cloud(self) -> str:
@@ -167,7 +227,7 @@ class PackageWriter:
     def _manifest(self, points: str) -> Manifest:
         a = self.args
         nf = a.frames
-        frames = [Frame(i, i * a.spacing / SPEED) for i in range(nf)]
+        frames = [Frame(i, self._time(i)) for i in range(nf)]
         cam_frames = [CameraFrame(self.K, c2w, conventions.invert_rigid(c2w), f"gt/train/{i:06d}.png",
                                   f"gt/depth/{i:06d}.exr") for i, c2w in enumerate(self.poses)]
         actors, masks = [], []
@@ -177,6 +237,7 @@ class PackageWriter:
             actors.append(Actor(ins["actor"], "inserted", f"{ins['asset']}/splats.ply", f"{ins['asset']}/mesh.obj",
                                 poses, np.array(ins["wlh"]), k + 1))
             masks.append(MaskEntry("front", ins["frame"], ins["actor"], visible=ins["mask"]))
+        actors += self._traffic_actors(len(actors) + 1)
         sunny = self.street.sun_direction is not None
         ground_truth = {
             "camera": "front",
@@ -198,13 +259,26 @@ class PackageWriter:
                 "points": self.n_points, "colour": "sRGB (Standard view transform, no look)",
             },
         }
+        if self.traffic is not None:
+            ground_truth["vehicles"] = {"camera": "front", "frames": {str(i): self.vehicle_masks[i]
+                                                                      for i in sorted(self.vehicle_masks)}}
+            ground_truth["edits"] = self.edits
+            ground_truth["generator"].update(traffic=a.traffic, edit_pixels=a.edit_pixels)
         return Manifest(
             name=f"street-{a.seed}{'-overcast' if a.overcast else ''}", frames=frames,
             cameras=[Camera("front", a.width, a.height, cam_frames)], actors=actors,
             background_points=points, masks=masks,
-            effects=Effects(lateral_offsets=[float(o) for o in a.offsets], harmonize=bool(actors),
-                            finetune=bool(actors), shadows=sunny, sun_direction=self.street.sun_direction),
+            effects=Effects(lateral_offsets=[float(o) for o in a.offsets], harmonize=bool(self.insertions),
+                            finetune=bool(self.insertions), shadows=sunny, sun_direction=self.street.sun_direction),
             ground_truth=ground_truth, root=self.root)
+
+    def _traffic_actors(self, first_id: int) -> list[Actor]:
+        """The traffic cars as recorded vehicles: exact per-frame poses and measured size; no
+        assets (the reconstruction fits them in their boxes)."""
+        if self.traffic is None:
+            return []
+        return [Actor(f"car_{k}", "existing", None, None, poses, np.array(self.traffic.wlh(k)), first_id + k)
+                for k, poses in enumerate(self.traffic.poses)]
 
     @property
     def renders(self) -> int:

@@ -31,6 +31,13 @@ PRESETS = {
     "suv": CarSpec("suv", 4.70, 1.90, 1.75, 0.37, 0.56, (-0.44, 0.20)),
     "hatchback": CarSpec("hatchback", 4.00, 1.74, 1.50, 0.31, 0.54, (-0.46, 0.14)),
 }
+# Body shapes of the moving traffic (world.traffic): none of them is parked, so a moving car is
+# never mistaken for a parked one. Kept apart from PRESETS, whose draws place the parked cars.
+TRAFFIC_PRESETS = {
+    "van": CarSpec("van", 5.00, 1.95, 1.95, 0.36, 0.50, (-0.48, 0.30)),
+    "coupe": CarSpec("coupe", 4.40, 1.82, 1.30, 0.32, 0.58, (-0.22, 0.12)),
+    "wagon": CarSpec("wagon", 4.80, 1.82, 1.50, 0.32, 0.55, (-0.47, 0.16)),
+}
 # Paint of the three exported assets (linear RGB).
 ASSET_PAINTS = {"sedan": (0.55, 0.04, 0.03), "suv": (0.04, 0.1, 0.35), "hatchback": (0.7, 0.7, 0.68)}
 

@@ -1,13 +1,16 @@
 """``symdrive import colmap|nerfstudio|3dgs``: a reconstruction of a recorded drive -> a scene package;
-``symdrive import lidar``: its LiDAR scans -> the package's sparse depth."""
+``symdrive import lidar``: its LiDAR scans -> the package's sparse depth; ``symdrive import tracks``:
+its vehicles' per-frame boxes -> the package's existing actors."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
-from . import add_quiet_option, count_int, positive_int
+from ..importers.tracks import TRACK_FORMATS, TracksConfig
+from . import add_quiet_option, count_int, default_of, positive_int
 
 
 def _common(p, images: bool) -> None:
@@ -36,7 +39,7 @@ def _common(p, images: bool) -> None:
 
 def add_commands(sub) -> None:
     imp = sub.add_parser("import", help="turn a COLMAP, nerfstudio or 3DGS reconstruction, or a KITTI sequence, into "
-                                        "a scene package; add LiDAR depth to one")
+                                        "a scene package; add LiDAR depth or tracked vehicles to one")
     isub = imp.add_subparsers(dest="format", required=True, metavar="FORMAT")
     p = isub.add_parser("colmap", help="COLMAP sparse model (text or binary); distorted cameras with --undistort")
     p.add_argument("model", metavar="MODEL_DIR", help="folder with cameras/images/points3D .bin or .txt")
@@ -79,6 +82,36 @@ def add_commands(sub) -> None:
     p.add_argument("--force", action="store_true", help="replace the camera's depth maps if it has some")
     add_quiet_option(p)
     p.set_defaults(func=_lidar)
+    _tracks_command(isub)
+
+
+def _tracks_command(isub) -> None:
+    p = isub.add_parser("tracks", help="add a recorded drive's tracked vehicles (per-frame 3D boxes) to a scene "
+                                       "package as existing actors")
+    p.add_argument("package", metavar="PACKAGE", help="scene package folder (or its manifest.json)")
+    p.add_argument("tracks", metavar="TRACKS_FILE",
+                   help="tracks as JSON (.json; format in docs/import.md) or KITTI tracking labels (.txt)")
+    p.add_argument("--format", dest="tracks_format", choices=TRACK_FORMATS,
+                   help="the file's format (default: from its suffix)")
+    p.add_argument("--types", type=_type_list, metavar="TYPE,...",
+                   help=f"KITTI object types to keep; DontCare never is (default {','.join(TracksConfig.types)})")
+    p.add_argument("--frame-offset", type=int, metavar="N",
+                   help="a box's frame minus N is its package frame, for a package that is a window of the "
+                        f"sequence (default {default_of(TracksConfig, 'frame_offset')})")
+    p.add_argument("--camera", help="the package camera of boxes in camera coordinates (default: the first)")
+    p.add_argument("--calib", metavar="FILE",
+                   help="KITTI calibration file: its P2 moves KITTI's boxes from rectified camera 0's frame into "
+                        "camera 2's (the package camera of a colour KITTI import)")
+    p.add_argument("--replace", action="store_true",
+                   help="tracks replace actors of kind existing with the same id (kind inserted never)")
+    p.set_defaults(func=_tracks)
+
+
+def _type_list(text: str) -> tuple[str, ...]:
+    types = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not types:
+        raise argparse.ArgumentTypeError(f"expected comma-separated object types (Car,Van), got {text!r}")
+    return types
 
 
 def _lateral_truth_option(p) -> None:
@@ -258,4 +291,27 @@ def _lidar(args) -> int:
     print(f"{info['package']}: sparse depth for camera {info['camera']} in {info['folder']}/ from {info['frames']} "
           f"scans ({info['points']} points, {100 * info['measured_fraction']:.1f}% of pixels measured; "
           f"{time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+def _tracks(args) -> int:
+    from dataclasses import replace
+
+    from ..errors import InputError
+    from ..importers.tracks import import_tracks, tracks_format
+    from . import given
+
+    t0 = time.perf_counter()
+    if tracks_format(args.tracks, args.tracks_format) != "kitti":
+        for flag, value in (("--types", args.types), ("--calib", args.calib)):
+            if value is not None:
+                raise InputError(args.tracks, f"{flag} is for KITTI labels; this is a JSON tracks file", flag)
+    config = replace(TracksConfig(), **given(args, "types", "frame_offset"))
+    info = import_tracks(args.package, args.tracks, fmt=args.tracks_format, camera=args.camera, calib=args.calib,
+                         replace=args.replace, config=config)
+    skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(info["skipped"].items())) or "none"
+    print(f"{info['package']}: {info['tracks']} tracks as existing actors ({info['replaced']} replacing actors), "
+          f"{info['boxes']} boxes; {info['outside']} boxes outside the package's frames 0..{info['frames'] - 1} "
+          f"({info['tracks_outside']} tracks with none inside, not added); types skipped: {skipped} "
+          f"({time.perf_counter() - t0:.1f} s)")
     return 0

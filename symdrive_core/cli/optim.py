@@ -1,4 +1,5 @@
-"""``symdrive reconstruct``: fit background Gaussians to a scene package's training drive."""
+"""``symdrive reconstruct``: fit background Gaussians (and each recorded vehicle's, in its own frame)
+to a scene package's training drive."""
 
 from __future__ import annotations
 
@@ -27,9 +28,13 @@ def add_commands(sub) -> None:
                    f"(default {default_of(ReconstructConfig, 'max_init_points')})")
     p.add_argument("--seed", type=int,
                    help=f"random seed of the reconstruction (default {default_of(ReconstructConfig, 'seed')})")
+    p.add_argument("--static", action="store_true",
+                   help="one static scene: do not fit the recorded vehicles (existing actors with a box) in their own "
+                        "frames")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
-                   help="do not point the manifest's background.splats at the result")
+                   help="do not point the manifest's background.splats (and the recorded vehicles' assets.splats) at "
+                        "the result")
     add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_reconstruct)
@@ -44,6 +49,8 @@ def _reconstruct(args) -> int:
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "depth_weight", "max_init_points", "seed"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
+    if args.static:
+        cfg.decompose = False
     if args.lateral:  # checked before hours of fitting, not after
         from ..scene.ground_truth import require_truth
 
@@ -59,15 +66,20 @@ def _reconstruct(args) -> int:
         from ..io.atomic import write_text_atomic
 
         if metrics["heldout_frames"]:
-            metrics["heldout"] = evaluate_heldout(manifest, result.gaussians, metrics["heldout_frames"])
+            metrics["heldout"] = evaluate_heldout(manifest, result.gaussians, metrics["heldout_frames"],
+                                                  actors=result.actors)
         if args.lateral:
             metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
         write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+    root = manifest.root.resolve()
     ply = (Path(out) / "background.ply").resolve()
-    if not args.no_link and ply.is_relative_to(manifest.root.resolve()):
-        manifest.background_splats = ply.relative_to(manifest.root.resolve()).as_posix()
+    if not args.no_link and ply.is_relative_to(root):
+        manifest.background_splats = ply.relative_to(root).as_posix()
+        for a in manifest.actors:
+            if a.id in result.actors:
+                a.splats = (Path(out) / "actors" / f"{a.id}.ply").resolve().relative_to(root).as_posix()
         manifest.save()
-    summary = {k: metrics[k] for k in ("gaussians", "seconds", "seconds_per_iteration", "heldout", "lateral")
-               if k in metrics}
+    summary = {k: metrics[k] for k in ("gaussians", "actors", "seconds", "seconds_per_iteration", "heldout", "lateral")
+               if k in metrics and metrics[k] != {}}
     print(json.dumps(summary, indent=1))
     return 0

@@ -11,6 +11,7 @@ over frames.
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from ..gaussians import Gaussians
 from ..io.images import read_image
@@ -18,24 +19,45 @@ from ..metrics import psnr, ssim
 from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..scene.ground_truth import lateral_views, missing_truth, require_truth, split_frames
-from ..splat.render import SplatRenderer
+from ..splat.render import SplatRenderer, render_scene
+from ..splat.tensors import GaussianTensors
 from .lane_paint import lane_truth
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
-                     camera: str | None = None) -> dict:
-    """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames."""
+                     camera: str | None = None, actors: dict[str, Gaussians] | None = None) -> dict:
+    """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames; with
+    ``actors`` (a decomposed reconstruction's recorded vehicles, by actor id) they are rendered
+    where the drive saw them."""
     frames = split_frames(manifest)[1] if frames is None else list(frames)
     if not frames:
         raise ValueError("evaluate_heldout: the package holds out no frames")
     cam = manifest.camera(camera) if camera else manifest.cameras[0]
-    render, scores = SplatRenderer(gaussians), []  # the parameters are converted once, not per frame
+    render, scores = recorded_renderer(manifest, gaussians, actors), []
     for i in frames:
         cf = cam.frames[i]
-        pred = render(CameraView.of_frame(cam, i))
+        pred = render(CameraView.of_frame(cam, i), i)
         scores.append(score_view(pred, read_image(manifest.resolve(cf.image), channels=3), None))
     p, s = np.mean(scores, axis=0)
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
+
+
+def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str, Gaussians] | None):
+    """``(view, frame) -> [H, W, 3]``: the background, plus ``actors`` at their recorded poses
+    (the parameters converted once, not per frame)."""
+    if not actors:
+        static = SplatRenderer(gaussians)
+        return lambda view, frame: static(view)
+    background = GaussianTensors.from_gaussians(gaussians)
+    placed = {a.id: (GaussianTensors.from_gaussians(actors[a.id]), a) for a in manifest.actors if a.id in actors}
+
+    @torch.no_grad()
+    def render(view: CameraView, frame: int) -> np.ndarray:
+        here = [(g, a.recorded_pose(frame), a.instance_id) for g, a in placed.values()
+                if a.recorded_pose(frame) is not None]
+        return render_scene(background, here, view)["rgb"].clamp(0, 1).numpy()
+
+    return render
 
 
 def lateral_targets(manifest: Manifest, frames: list[int] | None, needed_by: str | None = None) -> list:

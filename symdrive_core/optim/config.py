@@ -41,6 +41,10 @@ class ReconstructConfig:
     holdout_every: int = 5  # used when the package does not name its held-out frames
     checkpoint_every: int = 500
     seed: int = 0
+    # Recorded vehicles (existing actors with a box) fitted in their own frames; off: one static scene.
+    decompose: bool = True
+    actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
+    actor_max_gaussians: int = 40_000
 
 
 @dataclass

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +30,10 @@ from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..scene.depth import is_sky, measured, read_depth
 from ..scene.ground_truth import split_frames
-from ..splat.render import params_from_gaussians, render_params
-from .config import ReconstructConfig
-from .densify import GradStats, densify_and_prune, ndc_gradient_norm
+from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
+from . import decompose
+from .config import DensifyConfig, ReconstructConfig
+from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .losses import photometric
 
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
@@ -231,86 +232,215 @@ class Checkpoint:
 
 
 @dataclass
-class ReconstructResult:
-    gaussians: Gaussians
-    metrics: dict
-    output: Path
+class Part:
+    """One set of Gaussians fitted with the others: the background in the world frame (``poses``
+    None), or a recorded vehicle in its own frame, placed at each frame by its recorded pose."""
+
+    name: str
+    params: dict[str, torch.nn.Parameter]
+    opt: torch.optim.Adam
+    stats: GradStats
+    extent: float
+    centre: torch.Tensor
+    densify: DensifyConfig
+    checkpoint: Checkpoint | None = None
+    poses: list | None = None  # per frame local -> world Pose, None where absent
+    instance_id: int = 0
+    half: np.ndarray | None = None  # a vehicle's box half extents (x length, y width, z height)
+
+    @staticmethod
+    def start(name: str, initial: Gaussians | None, cfg: ReconstructConfig, extent: float, centre: torch.Tensor,
+              densify: DensifyConfig, checkpoint: Checkpoint | None, resume: bool, **placement) -> tuple[Part, int]:
+        """A part from ``initial``, or from its checkpoint when resuming; with the iteration it starts at."""
+        if resume and checkpoint is not None and checkpoint.exists():
+            params, opt, stats, it = checkpoint.load(cfg, extent)
+        elif initial is None:
+            raise ValueError(f"fit: no initial Gaussians and no checkpoint to resume {name} from")
+        else:
+            params = params_from_gaussians(initial, cfg.sh_degree)
+            opt, stats, it = make_optimizer(params, cfg, extent), GradStats(len(params["means"])), 0
+        return Part(name, params, opt, stats, extent, centre, densify, checkpoint, **placement), it
+
+    def present(self, frame: int) -> bool:
+        return self.poses is None or self.poses[frame] is not None
+
+    def layer(self, frame: int, degree: int) -> Layer:
+        g = activate(self.params, degree)
+        if self.poses is None:
+            return Layer(g)
+        p = self.poses[frame]
+        return Layer(g, torch.as_tensor(p.R, dtype=torch.float32), torch.as_tensor(p.translation, dtype=torch.float32),
+                     self.instance_id)
+
+    def gaussians(self) -> Gaussians:
+        return gaussians_from_params(self.params)
 
 
-def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *, checkpoint: Checkpoint | None = None,
-        resume: bool = False, progress: bool = True, desc: str = "reconstruct") -> tuple[Gaussians, dict]:
-    """Optimise ``initial`` against ``views``: the training loop with density control (``initial``
-    is None only when resuming from ``checkpoint``). Returns the Gaussians and a log (start
-    iteration, seconds, scene extent, densification steps)."""
+def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool):
+    """(rgb, alpha, info, present parts) of ``view``: the background alone through
+    :func:`render_params` (a drive without recorded vehicles trains as it always has), else every
+    part present at the frame composed in one rasterizer call."""
+    if len(parts) == 1 and parts[0].poses is None:
+        return (*render_params(parts[0].params, view.K, view.viewmat, view.width, view.height, degree,
+                               render_depth=render_depth), parts)
+    present = [p for p in parts if p.present(view.frame)]
+    out = render_layers([p.layer(view.frame, degree) for p in present], view.viewmat.double(), view.K,
+                        view.width, view.height, cull=False)
+    return out["rgb"], out["alpha"], out["info"], present
+
+
+def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, start: int, *, progress: bool = True,
+              desc: str = "reconstruct", keep=None) -> dict:
+    """Optimise ``parts`` jointly against ``views`` from iteration ``start``: the training loop with
+    density control per part (``keep(part) -> [N] bool``, optional: which Gaussians a part may keep
+    after each density step). Returns a log (start iteration, seconds, densification steps)."""
     from tqdm import tqdm
 
-    extent, centre = scene_extent(views)
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
-    if resume and checkpoint is not None and checkpoint.exists():
-        params, opt, stats, start = checkpoint.load(cfg, extent)
-    elif initial is None:
-        raise ValueError("fit: no initial Gaussians and no checkpoint to resume from")
-    else:
-        params = params_from_gaussians(initial, cfg.sh_degree)
-        opt = make_optimizer(params, cfg, extent)
-        stats, start = GradStats(len(params["means"])), 0
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
-    log = {"resumed_from": start, "extent_m": round(extent, 3), "densify": []}
+    log = {"resumed_from": start, "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, cfg.iters), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
     for it in bar:
         epoch, pos = divmod(it, len(views))
         order = np.random.default_rng((cfg.seed, epoch)).permutation(len(views))
         view = views[order[pos]]
-        for group in opt.param_groups:
-            if group["name"] == "means":
-                group["lr"] = position_lr(cfg, extent, it)
+        for part in parts:
+            for group in part.opt.param_groups:
+                if group["name"] == "means":
+                    group["lr"] = position_lr(cfg, part.extent, it)
         degree = min(cfg.sh_degree, it // cfg.sh_every)
-        rgb, alpha, info = render_params(params, view.K, view.viewmat, view.width, view.height, degree,
-                                  render_depth=cfg.depth_weight > 0)
+        rgb, alpha, info, present = render_parts(parts, view, degree, cfg.depth_weight > 0)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if cfg.depth_weight > 0:
             dl = depth_loss(info, alpha, view.depth)
             if dl is not None:
                 loss = loss + cfg.depth_weight * dl
-        opt.zero_grad(set_to_none=True)
+        for part in parts:
+            part.opt.zero_grad(set_to_none=True)
         means2d = info["means2d"]
         means2d.retain_grad()
         loss.backward()
         if it < densify_until and means2d.grad is not None:
-            stats.add(ndc_gradient_norm(means2d.grad, view.width, view.height), info["visible"])
-        opt.step()
+            ndc = ndc_gradient_norm(means2d.grad, view.width, view.height)
+            row = 0
+            for part in present:
+                n = len(part.params["means"])
+                part.stats.add(ndc[row:row + n], info["visible"][row:row + n])
+                row += n
+        for part in parts:
+            part.opt.step()
         step = it + 1
         if cfg.densify_from <= step < densify_until and step % cfg.densify_every == 0:
-            log["densify"].append({"iteration": step, **densify_and_prune(
-                opt, params, stats, cfg.densify, extent, centre, generator)})
+            for part in parts:
+                counts = densify_and_prune(part.opt, part.params, part.stats, part.densify, part.extent, part.centre,
+                                           generator)
+                counts["pruned"] += _keep(part, keep)
+                log["densify"].append({"iteration": step, "part": part.name, **counts})
         if step % 20 == 0:
-            bar.set_postfix(loss=f"{loss.item():.4f}", n=len(params["means"]))
-        if checkpoint is not None and (step % cfg.checkpoint_every == 0 or step == cfg.iters):
-            checkpoint.save(params, opt, stats, step, cfg)
+            bar.set_postfix(loss=f"{loss.item():.4f}", n=sum(len(p.params["means"]) for p in parts))
+        if step % cfg.checkpoint_every == 0 or step == cfg.iters:
+            for part in parts:
+                if part.checkpoint is not None:
+                    part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
     bar.close()
+    if keep is not None:  # Gaussians drift after the last density step: the roles hold for the result too
+        log["pruned_at_end"] = {part.name: _keep(part, keep) for part in parts}
     log["seconds"] = time.perf_counter() - t0
-    return gaussians_from_params(params), log
+    return log
+
+
+def _keep(part: Part, keep) -> int:
+    """Prune what ``keep(part)`` refuses; how many went."""
+    if keep is None:
+        return 0
+    kept = keep(part)
+    prune(part.opt, part.params, torch.from_numpy(kept))
+    part.stats.reset(len(part.params["means"]))
+    return int((~kept).sum())
+
+
+def fit(views: list[View], initial: Gaussians | None, cfg: ReconstructConfig, *, checkpoint: Checkpoint | None = None,
+        resume: bool = False, progress: bool = True, desc: str = "reconstruct") -> tuple[Gaussians, dict]:
+    """Optimise background Gaussians ``initial`` against ``views`` (``initial`` is None only when
+    resuming from ``checkpoint``). Returns the Gaussians and a log (start iteration, seconds, scene
+    extent, densification steps)."""
+    extent, centre = scene_extent(views)
+    part, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
+    log = fit_parts(views, [part], cfg, start, progress=progress, desc=desc)
+    return part.gaussians(), {**log, "extent_m": round(extent, 3)}
+
+
+@dataclass
+class ReconstructResult:
+    gaussians: Gaussians
+    metrics: dict
+    output: Path
+    actors: dict[str, Gaussians] = field(default_factory=dict)  # recorded vehicles, each in its own frame
+
+
+def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path, resume: bool,
+                rng: np.random.Generator) -> list[Part]:
+    """A part per recorded vehicle (:mod:`.decompose`), started on its box's faces in the colours the
+    training views show there."""
+    parts = []
+    budget = replace(cfg.densify, max_gaussians=cfg.actor_max_gaussians, max_angular_size=float("inf"))
+    seen = [(v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views]
+    for t in tracks:
+        initial = decompose.box_gaussians(t, cfg.actor_points, rng)
+        initial.sh[:, 0] = rgb_to_sh_dc(decompose.colour_from_views(t, initial.means.astype(np.float64), seen))
+        part, _ = Part.start(t.actor_id, initial, cfg, float(np.linalg.norm(t.half)), torch.zeros(3), budget,
+                             Checkpoint(out / "checkpoint" / "actors" / t.actor_id), resume,
+                             poses=t.poses, instance_id=t.instance_id, half=t.half)
+        parts.append(part)
+    return parts
+
+
+def keep_in_role(tracks: list[decompose.Track]):
+    """The density step's extra pruning rule of a decomposed fit: a vehicle keeps what lies in its
+    padded box, the background what lies outside every box of every track."""
+    def keep(part: Part) -> np.ndarray:
+        means = part.params["means"].detach().double().numpy()
+        if part.half is not None:
+            return decompose.inside_box(means, part.half)
+        return ~decompose.in_swept_boxes(means, tracks)
+    return keep
 
 
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
                 resume: bool = False, progress: bool = True) -> ReconstructResult:
-    """Fit background Gaussians to the training frames; write ``out/background.ply``,
-    ``out/checkpoint/`` and ``out/metrics.json`` (the fit: iterations, timings, frames). Scoring the
-    result is the caller's (``eval.views.evaluate_heldout`` on the held-out frames)."""
+    """Fit the training frames: background Gaussians, and with ``cfg.decompose`` one set per
+    recorded vehicle (``existing`` actors with a box) in its own frame. Writes
+    ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/`` and ``out/metrics.json``
+    (the fit: iterations, timings, frames). Scoring the result is the caller's
+    (``eval.views.evaluate_heldout`` on the held-out frames)."""
     cfg = cfg or ReconstructConfig()
     out = Path(out)
     train_frames, heldout = split_frames(manifest, cfg.holdout_every)
     views = load_views(manifest, train_frames, depth=True)
+    tracks = decompose.tracks(manifest) if cfg.decompose else []
     checkpoint = Checkpoint(out / "checkpoint")
-    initial = None if resume and checkpoint.exists() else initial_gaussians(manifest, views, cfg)
-    g, log = fit(views, initial, cfg, checkpoint=checkpoint, resume=resume, progress=progress)
-    seconds, start = log["seconds"], log["resumed_from"]
+    initial = None
+    if not (resume and checkpoint.exists()):
+        initial = initial_gaussians(manifest, views, cfg)
+        if tracks:  # points on a moving car are smeared along its path: the vehicle's part explains them
+            initial = initial.subset(~decompose.in_swept_boxes(initial.means, tracks))
+    extent, centre = scene_extent(views)
+    background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
+    parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed))]
+    log = fit_parts(views, parts, cfg, start, progress=progress, keep=keep_in_role(tracks) if tracks else None)
+    seconds = log["seconds"]
+    g = background.gaussians()
     write_splats(out / "background.ply", g)
+    actors = {p.name: p.gaussians() for p in parts[1:]}
+    for name, ga in actors.items():
+        write_splats(out / "actors" / f"{name}.ply", ga)
     metrics = {"iterations": cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
-               "extent_m": log["extent_m"], "densify": log["densify"]}
+               "extent_m": round(extent, 3), "densify": log["densify"],
+               **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
+               "actors": {name: {"gaussians": len(ga)} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-    return ReconstructResult(g, metrics, out)
+    return ReconstructResult(g, metrics, out, actors)

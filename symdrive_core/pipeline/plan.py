@@ -96,13 +96,20 @@ def sh_degree_of(path: Path) -> int:
     return round(np.sqrt(n_rest // 3 + 1)) - 1
 
 
-def check_renderable(manifest: Manifest) -> None:
+def check_renderable(manifest: Manifest, reconstructs: bool = False) -> None:
     """Every actor can be rendered: it names a readable splat PLY (what it renders from), or no
-    splats and a readable mesh (sampled into splats at render time). Otherwise the plan stops,
+    splats and a readable mesh (sampled into splats at render time), or it is a recorded vehicle
+    with a box that this run's reconstruction fits (``reconstructs``). Otherwise the plan stops,
     naming the actor and why (``ManifestError`` at ``actors[i].assets``: exit 2)."""
     from ..io.mesh import read_mesh
 
     for i, a in enumerate(manifest.actors):
+        if not (a.splats or a.mesh) and a.kind == "existing":
+            if reconstructs:
+                continue
+            raise ManifestError(manifest.path or manifest.root, f"actor {a.id!r} is a recorded vehicle with no "
+                                "Gaussians yet: 'symdrive reconstruct' fits it in its box (with the background)",
+                                f"actors[{i}].assets")
         if a.splats:
             path, what = manifest.resolve(a.splats), f"splat file {a.splats!r}"
         elif a.mesh:
@@ -226,26 +233,30 @@ def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: b
                          f"({drive['identity']})", train)
 
 
+def _reconstruct(manifest: Manifest, frames: list[int]) -> StageDecision:
+    if manifest.background_splats:
+        return StageDecision("reconstruct", False, "background splats given")
+    if not (manifest.background_points and _has_ground_truth(manifest)):
+        return StageDecision("reconstruct", False, "no background splats and no images to fit")
+    from ..optim.decompose import tracks
+
+    recorded = [t.actor_id for t in tracks(manifest)]
+    return StageDecision("reconstruct", True, "no background splats: fit them to the images" + (
+        f", and {len(recorded)} recorded vehicle(s) in their own frames" if recorded else ""), frames, recorded)
+
+
 def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: dict | None = None,
               key: str | None = None) -> Plan:
     """Decide every stage for this scene. ``previous`` is the last run's state and ``key`` this
     run's cache key (see cache_key.inputs_key; by default, that of these options alone)."""
     opt = options or PlanOptions()
     eff = manifest.effects
-    check_renderable(manifest)
-    visible, culled = _visibility(manifest, opt.near)
     frames_all = list(range(len(manifest.frames)))
+    stages: list[StageDecision] = [_reconstruct(manifest, frames_all)]
+    check_renderable(manifest, stages[0].run)
+    visible, culled = _visibility(manifest, opt.near)
     window = _window(manifest, opt.frames)
     in_window = frames_all if window is None else window
-    stages: list[StageDecision] = []
-
-    if manifest.background_splats:
-        stages.append(StageDecision("reconstruct", False, "background splats given"))
-    elif manifest.background_points and _has_ground_truth(manifest):
-        stages.append(StageDecision("reconstruct", True, "no background splats: fit them to the images",
-                                    frames_all))
-    else:
-        stages.append(StageDecision("reconstruct", False, "no background splats and no images to fit"))
 
     # The decisions below see only the window's frames; plan.visible keeps every frame.
     shown = {cam: {fi: ids for fi, ids in frames.items() if fi in in_window} for cam, frames in visible.items()}

@@ -113,28 +113,25 @@ class SceneRenderer:
         return CameraView(conventions.invert_rigid(c2w), cf.K, cam.width, cam.height)
 
     def render(self, camera: str, frame: int, actor_ids: list[str] | None = None, *,
-               lateral_offset_m: float = 0.0, with_background: bool = True) -> FrameRender:
-        from ..splat.render import Layer, render_layers
+               lateral_offset_m: float = 0.0, with_background: bool = True, recorded: bool = False) -> FrameRender:
+        """``recorded``: existing actors where the drive saw them (their recorded poses), not as edited."""
+        from ..splat.render import render_scene
 
-        view = self.view(camera, frame, lateral_offset_m)
-        ids = [a.id for a in self.manifest.actors if a.pose(frame) is not None] if actor_ids is None else actor_ids
-        layers = []
-        if with_background and self.background is not None:
-            layers.append(Layer(self.background, None, None, 0))
+        def pose_of(actor):
+            return actor.recorded_pose(frame) if recorded else actor.pose(frame)
+
+        ids = [a.id for a in self.manifest.actors if pose_of(a) is not None] if actor_ids is None else actor_ids
+        placed = []
         for aid in ids:
             if aid not in self.actors:
                 continue
             actor = self.manifest.actor(aid)
-            pose = actor.pose(frame)
-            if pose is None:
-                continue
-            layers.append(Layer(self.actors[aid],
-                                torch.as_tensor(pose.R, dtype=torch.float32, device=self.device),
-                                torch.as_tensor(pose.translation, dtype=torch.float32, device=self.device),
-                                actor.instance_id))
-        out = render_layers(layers, torch.as_tensor(view.world_to_camera, dtype=torch.float64, device=self.device),
-                            torch.as_tensor(view.K, dtype=torch.float32, device=self.device), view.width, view.height,
-                            background=self.background_color, antialiased=self.antialiased)
+            pose = pose_of(actor)
+            if pose is not None:
+                placed.append((self.actors[aid], pose, actor.instance_id))
+        out = render_scene(self.background if with_background else None, placed,
+                           self.view(camera, frame, lateral_offset_m), background_color=self.background_color,
+                           antialiased=self.antialiased)
         by_instance = {a.instance_id: a.id for a in self.manifest.actors}
         instance = {}
         for k, iid in enumerate(out["actor_ids"]):
@@ -169,10 +166,11 @@ class SceneRenderer:
 
 
 def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: list[tuple[str, int]], device: str,
-                  progress: bool = True, background=None) -> int:
+                  progress: bool = True, background=None, actors: dict | None = None) -> int:
     """Render (camera, frame) jobs whose outputs are missing into the output tree (RGB written last:
     its presence marks the frame complete); returns how many were rendered. ``background``:
-    Gaussians to use instead of the manifest's (a reconstruction this run fitted)."""
+    Gaussians to use instead of the manifest's (a reconstruction this run fitted), ``actors`` its
+    recorded vehicles' by actor id."""
     out = out if isinstance(out, OutputTree) else OutputTree(out)
     renderer = None
     done = 0
@@ -183,7 +181,7 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: 
             continue
         if renderer is None:
             renderer = SceneRenderer(manifest, device=device, asset_cache=out.folder(ASSET_CACHE),
-                                     background_gaussians=background)
+                                     background_gaussians=background, actor_gaussians=actors)
         frame = renderer.render(cam, fi, plan.visible[cam][fi])
         if casting.run and fi in casting.frames:
             casters = [a for a in plan.visible[cam][fi] if a in casting.actors]

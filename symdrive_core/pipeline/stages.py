@@ -80,6 +80,7 @@ class Shared:
 
     background: object = None  # Gaussians
     background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
+    actors: dict = field(default_factory=dict)  # its recorded vehicles' Gaussians, by actor id
     restorer: object = None
     drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
     adapted: Path | None = None  # the folder of this drive's adapted restorer
@@ -102,6 +103,17 @@ def background(ctx):
     if ctx.shared.background is None:
         ctx.shared.background = read_splats(background_path(ctx))
     return ctx.shared.background
+
+
+def recorded_vehicles(ctx) -> dict:
+    """The recorded vehicles' Gaussians by actor id: this run's reconstruction's, else the package's
+    (existing actors with a splat PLY)."""
+    from ..io.ply import read_splats
+
+    if not ctx.shared.actors:
+        ctx.shared.actors = {a.id: read_splats(ctx.manifest.resolve(a.splats)) for a in ctx.manifest.actors
+                             if a.kind == "existing" and a.splats}
+    return ctx.shared.actors
 
 
 def restorer(ctx):
@@ -175,7 +187,8 @@ def reconstruct_stage(ctx) -> StageResult:
     out = ctx.tree.folder("reconstruction")
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
     ctx.shared.background_path = out / "background.ply"
-    return StageResult({k: v for k, v in vars(result).items() if isinstance(v, (int, float))})
+    ctx.shared.actors = result.actors
+    return StageResult({"gaussians": len(result.gaussians), "actors": {k: len(g) for k, g in result.actors.items()}})
 
 
 @stage("render")
@@ -185,7 +198,8 @@ def render_stage(ctx) -> StageResult:
 
     jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("render").frames]
     fitted = background(ctx) if ctx.shared.background_path is not None else None
-    done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted)
+    done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted,
+                         actors=ctx.shared.actors)
     return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
 
 
@@ -395,7 +409,7 @@ def evaluate_stage(ctx) -> StageResult:
     m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
     has_background = background_path(ctx) is not None
     if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
-        metrics["reconstruction"] = evaluate_heldout(m, background(ctx))
+        metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx))
     if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))

@@ -14,19 +14,31 @@
                 "lateral": [{"offset_m": 0.5, "camera": "front",
                              "frames": {"0": "gt/lanes/lateral/+0.5/000000.png", ...}}, ...]},
       "road": {"centerline": [[x, y, z], ...], "lanes": 2, "lane_width": 3.5},
+      "vehicles": {"camera": "front",       # moving traffic (existing actors), exact visible masks
+                   "frames": {"0": "gt/vehicles/000000.png", ...}},
+      "edits": [{"kind": "remove" | "move" | "retime", "actor", "camera", "frame",
+                 "image", "mask", "pose" (null for remove), "lateral_m" (move), "shift_s" (retime),
+                 "mask_pixels"}, ...],
       "generator": {...}                    # settings and Cycles timings
     }
 
 A lateral ground-truth camera is the frame's camera moved ``offset_m`` along its own +x
 (``conventions.lateral_shift``; positive = right), same intrinsics and orientation.
+
+An edit is a held-out frame rendered again with one existing actor removed, moved across the
+road (``lateral_m``, positive = the ego's left) or put where it is ``shift_s`` later on its own
+trajectory: the truth an edited scene's render of that frame is scored against.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from .camera import CameraView, SeenBy
 from .manifest import Manifest, ManifestError
+from .poses import Pose
 
 
 def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int], list[int]]:
@@ -74,6 +86,43 @@ def lateral_views(manifest: Manifest) -> list[LateralView]:
             out.append(LateralView(off, int(key), CameraView.of_frame(cam, int(key)).shifted(off), rel,
                                    masks.get((cam.name, off, int(key)))))
     return out
+
+
+@dataclass
+class EditTruth:
+    kind: str  # "remove" | "move" | "retime"
+    actor: str  # the edited existing actor
+    camera: str
+    frame: int
+    image: str  # the edited frame, relative to the package
+    mask: str  # the actor's visible mask in it (remove: in the recorded frame)
+    pose: Pose | None  # the actor's edited pose; None for remove
+    lateral_m: float | None = None  # move: metres across the road, positive = the ego's left
+    shift_s: float | None = None  # retime: seconds later on its own trajectory
+    mask_pixels: int | None = None
+
+
+def edit_truth(manifest: Manifest) -> list[EditTruth]:
+    """Every edited held-out frame of the package, in the order written."""
+    gt = manifest.ground_truth or {}
+    camera = gt.get("camera", manifest.cameras[0].name)
+    out = []
+    for e in gt.get("edits", []):
+        pose = e.get("pose")
+        out.append(EditTruth(
+            e["kind"], e["actor"], e.get("camera", camera), int(e["frame"]), e["image"], e["mask"],
+            None if pose is None else Pose(np.array(pose["translation"], dtype=np.float64),
+                                           np.array(pose["rotation"], dtype=np.float64)),
+            None if e.get("lateral_m") is None else float(e["lateral_m"]),
+            None if e.get("shift_s") is None else float(e["shift_s"]),
+            None if e.get("mask_pixels") is None else int(e["mask_pixels"])))
+    return out
+
+
+def vehicle_masks(manifest: Manifest) -> dict[int, str]:
+    """Frame -> mask of the moving traffic's visible pixels (empty for a package without traffic)."""
+    frames = (manifest.ground_truth or {}).get("vehicles", {}).get("frames", {})
+    return {int(k): rel for k, rel in sorted(frames.items(), key=lambda kv: int(kv[0]))}
 
 
 def with_lateral_offsets(manifest: Manifest, offsets) -> Manifest:

@@ -77,9 +77,23 @@ class Actor:
     poses: list[Pose | None]  # one per frame; None = not in the scene in that frame
     wlh: np.ndarray | None = None
     instance_id: int = 0  # 1-based id used in id-map masks and instance channels
+    # An existing actor's poses as the drive recorded them, when an edit changed ``poses`` (None:
+    # unedited, the recorded poses are ``poses``). Its Gaussians are fitted at these.
+    recorded_poses: list[Pose | None] | None = None
 
     def pose(self, frame: int) -> Pose | None:
         return self.poses[frame]
+
+    def recorded_pose(self, frame: int) -> Pose | None:
+        """Where the drive saw this actor at ``frame`` (an existing actor's track, before edits)."""
+        return (self.recorded_poses or self.poses)[frame]
+
+    def edited_frames(self, tolerance_m: float = 1e-3) -> list[int]:
+        """Frames where the edited pose leaves the recorded one: removed, moved or retimed there."""
+        if self.recorded_poses is None:
+            return []
+        return [f for f, (r, p) in enumerate(zip(self.recorded_poses, self.poses))
+                if r is not None and (p is None or not p.close_to(r, tolerance_m))]
 
 
 @dataclass
@@ -249,6 +263,8 @@ class Manifest:
                 "assets": {"splats": a.splats, "mesh": a.mesh},
                 **({"wlh": [float(v) for v in a.wlh]} if a.wlh is not None else {}),
                 "poses": [None if p is None else p.to_json() for p in a.poses],
+                **({} if a.recorded_poses is None else {
+                    "recorded_poses": [None if p is None else p.to_json() for p in a.recorded_poses]}),
             } for a in self.actors],
             "masks": {
                 "entries": [{k: v for k, v in vars(m).items() if v is not None} for m in self.masks],
@@ -426,6 +442,16 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
             camera(e["camera"], f"ground_truth.insertion[{ii}].camera")
         if "frame" in e:
             frame(e["frame"], f"ground_truth.insertion[{ii}].frame")
+    vehicles = gt.get("vehicles", {})
+    if "camera" in vehicles:
+        camera(vehicles["camera"], "ground_truth.vehicles.camera")
+    for k in vehicles.get("frames", {}):
+        frame(k, f"ground_truth.vehicles.frames.{k}")
+    for ei, e in enumerate(gt.get("edits", [])):
+        if "camera" in e:
+            camera(e["camera"], f"ground_truth.edits[{ei}].camera")
+        if "frame" in e:
+            frame(e["frame"], f"ground_truth.edits[{ei}].frame")
 
 
 def _frames(rd: _Reader, d: dict) -> list[Frame]:
@@ -509,8 +535,6 @@ def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
         assets = rd.obj(rd.key(a, "assets", w), f"{w}.assets")
         splats = rd.ref(assets.get("splats"), f"{w}.assets.splats")
         mesh = rd.ref(assets.get("mesh"), f"{w}.assets.mesh")
-        if splats is None and mesh is None:
-            rd.fail(f"{w}.assets", "expected a splat PLY and/or a mesh path")
         wlh = None
         if a.get("wlh") is not None:
             wlh = rd.vector(a["wlh"], 3, f"{w}.wlh")
@@ -518,29 +542,42 @@ def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
                 rd.fail(f"{w}.wlh", "sizes must be positive metres")
             if np.any(wlh > WLH_MAX):
                 rd.fail(f"{w}.wlh", f"sizes must be at most {WLH_MAX:g} m, got {', '.join(f'{v:g}' for v in wlh)}")
-        plist = rd.lst(rd.key(a, "poses", w), f"{w}.poses")
-        if len(plist) != nf:
-            rd.fail(f"{w}.poses", f"expected {nf} entries (one per frame, null where absent), got {len(plist)}")
-        poses: list[Pose | None] = []
-        for pi, p in enumerate(plist):
-            wp = f"{w}.poses[{pi}]"
-            if p is None:
-                poses.append(None)
-                continue
-            p = rd.obj(p, wp)
-            t = rd.vector(rd.key(p, "translation", wp), 3, f"{wp}.translation")
-            if np.abs(t).max() > COORD_MAX:
-                rd.fail(f"{wp}.translation", f"beyond {COORD_MAX:g} m")
-            q = rd.vector(rd.key(p, "rotation", wp), 4, f"{wp}.rotation")
-            norm = np.linalg.norm(q)
-            if norm < 1e-8:
-                rd.fail(f"{wp}.rotation", "zero quaternion (expected unit w, x, y, z)")
-            poses.append(Pose(t, q / norm))
+        if splats is None and mesh is None and (kind == "inserted" or wlh is None):
+            rd.fail(f"{w}.assets", "expected a splat PLY and/or a mesh path (an existing actor without them "
+                                   "needs its wlh: the reconstruction fits it in its box)")
+        poses = _pose_list(rd, rd.key(a, "poses", w), f"{w}.poses", nf)
+        recorded = None
+        if a.get("recorded_poses") is not None:
+            if kind != "existing":
+                rd.fail(f"{w}.recorded_poses", "only an existing actor has recorded poses")
+            recorded = _pose_list(rd, a["recorded_poses"], f"{w}.recorded_poses", nf)
         iid = rd.integer(a.get("instance_id", ai + 1), f"{w}.instance_id", 1, ID_MAX)
         if any(x.instance_id == iid for x in actors):
             rd.fail(f"{w}.instance_id", f"duplicate instance id {iid}")
-        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid))
+        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid, recorded))
     return actors
+
+
+def _pose_list(rd: _Reader, value, w: str, nf: int) -> list[Pose | None]:
+    plist = rd.lst(value, w)
+    if len(plist) != nf:
+        rd.fail(w, f"expected {nf} entries (one per frame, null where absent), got {len(plist)}")
+    poses: list[Pose | None] = []
+    for pi, p in enumerate(plist):
+        wp = f"{w}[{pi}]"
+        if p is None:
+            poses.append(None)
+            continue
+        p = rd.obj(p, wp)
+        t = rd.vector(rd.key(p, "translation", wp), 3, f"{wp}.translation")
+        if np.abs(t).max() > COORD_MAX:
+            rd.fail(f"{wp}.translation", f"beyond {COORD_MAX:g} m")
+        q = rd.vector(rd.key(p, "rotation", wp), 4, f"{wp}.rotation")
+        norm = np.linalg.norm(q)
+        if norm < 1e-8:
+            rd.fail(f"{wp}.rotation", "zero quaternion (expected unit w, x, y, z)")
+        poses.append(Pose(t, q / norm))
+    return poses
 
 
 def _masks(rd: _Reader, d: dict, cam_names: set, actor_ids: set, nf: int) -> tuple[list[MaskEntry], list[IdMap]]:

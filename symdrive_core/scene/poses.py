@@ -47,6 +47,11 @@ class Pose:
         return Pose(self.apply(other.translation[None])[0],
                     quat_normalize(quat_multiply(self.rotation, other.rotation)))
 
+    def close_to(self, other: Pose, tolerance_m: float = 1e-3) -> bool:
+        """Within ``tolerance_m`` in position and in the motion of a point 1 m from the origin."""
+        turn = np.linalg.norm(self.R - other.R, 2)
+        return bool(np.linalg.norm(self.translation - other.translation) <= tolerance_m and turn <= tolerance_m)
+
     def to_json(self) -> dict:
         return {"translation": [float(v) for v in self.translation],
                 "rotation": [float(v) for v in self.rotation]}

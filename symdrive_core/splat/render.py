@@ -24,8 +24,10 @@ from ..scene.camera import CameraView
 from .compose import Layer, compose_layers
 from .constants import ALPHA_THRESHOLD, EPS2D
 from .rasterizer import rasterize
+from .tensors import GaussianTensors
 
-__all__ = ["Layer", "SplatRenderer", "params_from_gaussians", "render_layers", "render_params"]
+__all__ = ["Layer", "SplatRenderer", "activate", "params_from_gaussians", "render_layers", "render_params",
+           "render_scene"]
 
 
 def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
@@ -51,6 +53,20 @@ def render_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, w
             "culled": c.culled, "info": info}
 
 
+def render_scene(background: GaussianTensors | None, placed: list, view: CameraView, *, background_color=None,
+                 antialiased: bool = False) -> dict:
+    """A background plus actors ``placed`` as (Gaussians, Pose, instance id), seen by ``view``:
+    :func:`render_layers`' dict."""
+    device = background.device if background is not None else (placed[0][0].device if placed else "cpu")
+    layers = [] if background is None else [Layer(background)]
+    for g, pose, instance_id in placed:
+        layers.append(Layer(g, torch.as_tensor(pose.R, dtype=torch.float32, device=device),
+                            torch.as_tensor(pose.translation, dtype=torch.float32, device=device), instance_id))
+    return render_layers(layers, torch.as_tensor(view.world_to_camera, dtype=torch.float64, device=device),
+                         torch.as_tensor(view.K, dtype=torch.float32, device=device), view.width, view.height,
+                         background=background_color, antialiased=antialiased)
+
+
 def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Parameter]:
     """Trainable float32 parameters of ``g`` up to ``sh_degree`` (missing SH bands are zero)."""
     k = sh_coeff_count(sh_degree)
@@ -64,15 +80,22 @@ def params_from_gaussians(g: Gaussians, sh_degree: int) -> dict[str, torch.nn.Pa
     return {n: torch.nn.Parameter(torch.tensor(np.ascontiguousarray(v), dtype=torch.float32)) for n, v in p.items()}
 
 
+def activate(params: dict[str, torch.Tensor], sh_degree: int) -> GaussianTensors:
+    """The parameters as the rasterizer takes them (in the graph: gradients reach ``params``), SH
+    up to ``sh_degree``."""
+    sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
+        [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
+    quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
+    return GaussianTensors(params["means"], quats, params["log_scales"].exp(), torch.sigmoid(params["opacity_logits"]),
+                           sh, sh_degree)
+
+
 def render_params(params: dict[str, torch.Tensor], K, viewmat, width: int, height: int,
                   sh_degree: int, render_depth: bool = False, **raster_options):
     """Activate the parameters and rasterize: (rgb [H,W,3], alpha [H,W,1], info).
     ``raster_options`` go to :func:`~.rasterizer.rasterize` (antialiased, extent, ...)."""
-    sh = params["sh0"] if sh_degree == 0 or "shN" not in params else torch.cat(
-        [params["sh0"], params["shN"][:, : sh_coeff_count(sh_degree) - 1]], 1)
-    quats = params["quats"] / params["quats"].norm(dim=1, keepdim=True).clamp_min(1e-12)
-    return rasterize(params["means"], quats, params["log_scales"].exp(),
-                     torch.sigmoid(params["opacity_logits"]), sh, viewmat, K, width, height,
+    g = activate(params, sh_degree)
+    return rasterize(g.means, g.quats, g.scales, g.opacities, g.sh, viewmat, K, width, height,
                      sh_degree=sh_degree, render_depth=render_depth, **raster_options)
 
 

@@ -1,0 +1,131 @@
+"""Recorded vehicles as Gaussian sets of their own (Street Gaussians, the paper's base).
+
+A static 3DGS smears a moving car along its path. Instead each ``existing`` actor with a box
+(``wlh``) and recorded poses gets its own Gaussians in its local 3DRealCar frame, placed at every
+frame by ``mu_w = R(t) mu_l + T(t)`` (:mod:`symdrive_core.splat.compose`), and fitted jointly with
+the background. Two rules keep the roles apart: a vehicle's Gaussians stay inside its (padded) box,
+and the background keeps none inside the volume any recorded box sweeps (above a thin layer of
+road under the wheels), so the background cannot learn a car.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..gaussians import Gaussians, rgb_to_sh_dc
+from ..scene import Actor, Manifest
+from ..scene.poses import Pose
+
+BOX_PAD = 0.1  # a vehicle's Gaussians may reach 10 % beyond its box (mirrors, wheels, box error)
+ROAD_LAYER_M = 0.15  # the background keeps what lies this close above a box's underside (the road)
+
+
+@dataclass
+class Track:
+    """One recorded vehicle to decompose: its box and where the drive saw it."""
+
+    actor_id: str
+    instance_id: int
+    wlh: np.ndarray  # width, length, height (metres)
+    poses: list[Pose | None]  # recorded, one per frame
+
+    @property
+    def half(self) -> np.ndarray:
+        """Half extents along the local x (length), y (width), z (height)."""
+        w, length, h = self.wlh
+        return 0.5 * np.array([length, w, h])
+
+    def frames(self) -> list[int]:
+        return [f for f, p in enumerate(self.poses) if p is not None]
+
+
+def tracks(manifest: Manifest) -> list[Track]:
+    """The package's recorded vehicles that can be decomposed: ``existing`` actors with a box and a
+    recorded pose at some frame."""
+    return [Track(a.id, a.instance_id, np.asarray(a.wlh, np.float64), [a.recorded_pose(f) for f in range(len(a.poses))])
+            for a in manifest.actors if _decomposable(a)]
+
+
+def _decomposable(a: Actor) -> bool:
+    return a.kind == "existing" and a.wlh is not None and any(
+        a.recorded_pose(f) is not None for f in range(len(a.poses)))
+
+
+def inside_box(local: np.ndarray, half: np.ndarray, pad: float = BOX_PAD, floor_m: float = 0.0) -> np.ndarray:
+    """[N] whether local points lie in the box padded by ``pad`` (a fraction), its floor raised by
+    ``floor_m``."""
+    lim = half * (1.0 + pad)
+    return (np.abs(local[:, 0]) <= lim[0]) & (np.abs(local[:, 1]) <= lim[1]) & (local[:, 2] <= lim[2]) & (
+        local[:, 2] >= -half[2] + floor_m)
+
+
+def in_swept_boxes(points: np.ndarray, tracks_: list[Track]) -> np.ndarray:
+    """[N] whether world points fall in any track's box at any frame, the road layer under it
+    excluded: what the background must not hold."""
+    points = np.asarray(points, np.float64)
+    hit = np.zeros(len(points), bool)
+    for t in tracks_:
+        for p in (t.poses[f] for f in t.frames()):
+            centre_dist = np.abs(points - p.translation).max(1)
+            near = np.nonzero(centre_dist <= np.linalg.norm(t.half) * (1.0 + BOX_PAD))[0]
+            if len(near):
+                local = (points[near] - p.translation) @ p.R
+                hit[near[inside_box(local, t.half, pad=0.0, floor_m=ROAD_LAYER_M)]] = True
+    return hit
+
+
+def box_gaussians(track: Track, n: int, rng: np.random.Generator) -> Gaussians:
+    """``n`` grey Gaussians on the faces of the track's box (a car's surface is near its box), in
+    its local frame, sized to their spacing (:func:`colour_from_views` colours them)."""
+    half = track.half
+    areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]]).repeat(2)
+    face = rng.choice(6, n, p=areas / areas.sum())
+    pts = rng.uniform(-1.0, 1.0, (n, 3)) * half * 0.95
+    axis, sign = face // 2, np.where(face % 2 == 0, 1.0, -1.0)
+    pts[np.arange(n), axis] = sign * half[axis] * 0.95
+    spacing = np.sqrt(2.0 * areas.sum() / n)
+    return Gaussians(
+        means=pts.astype(np.float32),
+        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        log_scales=np.full((n, 3), np.log(0.5 * spacing), np.float32),
+        opacity_logits=np.zeros(n, np.float32),  # 0.5: a surface the fit can thin out or fill in
+        sh=rgb_to_sh_dc(np.full((n, 3), 0.5))[:, None, :].astype(np.float32))
+
+
+def colour_from_views(track: Track, local: np.ndarray, views) -> np.ndarray:
+    """[N, 3] median colour of each local point over the views (frame, K, world_to_camera, image
+    [H, W, 3]) where the track is present and the point projects inside the image; grey where none.
+    A start the fit can reach: from grey, colour moves slower than opacity, and Gaussians that
+    must change colour much turn transparent instead."""
+    samples = [[] for _ in range(len(local))]
+    for frame, K, w2c, image in views:
+        p = track.poses[frame]
+        if p is None:
+            continue
+        cam = p.apply(local) @ w2c[:3, :3].T + w2c[:3, 3]
+        h, w = image.shape[:2]
+        z = np.maximum(cam[:, 2], 1e-6)
+        u, v = cam[:, 0] / z * K[0, 0] + K[0, 2], cam[:, 1] / z * K[1, 1] + K[1, 2]
+        ok = np.nonzero((cam[:, 2] > 0.1) & (u >= 0) & (u < w) & (v >= 0) & (v < h))[0]
+        for k, c in zip(ok, image[v[ok].astype(int), u[ok].astype(int)]):
+            samples[k].append(c)
+    return np.array([np.median(s, axis=0) if s else np.full(3, 0.5) for s in samples], np.float64)
+
+
+def box_pixels(track: Track, frame: int, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int):
+    """(y0, y1, x0, x1) of the track's box projected at ``frame``, clipped to the image, or None
+    when it is behind the camera or outside."""
+    p = track.poses[frame]
+    if p is None:
+        return None
+    corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T * track.half
+    cam = (corners @ p.R.T + p.translation) @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
+    if np.any(cam[:, 2] <= 0.1):
+        return None
+    uv = cam[:, :2] / cam[:, 2:] * np.array([K[0, 0], K[1, 1]]) + K[:2, 2]
+    x0, y0 = np.floor(uv.min(0)).astype(int)
+    x1, y1 = np.ceil(uv.max(0)).astype(int)
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, width), min(y1, height)
+    return None if x1 <= x0 or y1 <= y0 else (y0, y1, x0, x1)
