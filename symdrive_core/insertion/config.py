@@ -26,6 +26,15 @@ class HarmonizeConfig:
     seed: int = 0
 
 
+@dataclass(frozen=True)
+class InpaintConfig:
+    """RePaint over what an edit of a recorded vehicle exposes (:mod:`.exposed`), with the
+    harmonizer's sampler; the region is grown by ``dilate_px`` to cover the vehicle's soft rim."""
+
+    harmonize: HarmonizeConfig = HarmonizeConfig()
+    dilate_px: int = 2
+
+
 @dataclass
 class InsertionConfig:
     train_views: int = 6

@@ -5,6 +5,7 @@ asset headers alone (no torch, no model), so ``symdrive plan`` is instant and th
 never loads a diffusion model for a scene that needs none.
 
 * no inserted actor (or harmonization off)   -> no harmonize / finetune, no diffusion model
+* no recorded vehicle removed, moved, retimed -> no inpainting of what an edit exposes
 * no lateral offsets                          -> no restore / refine
 * restorer weights trained on another drive   -> adapt them to this one (its recorded frames)
 * actor outside every frustum in a frame      -> not rendered, not harmonized in that frame
@@ -26,7 +27,7 @@ from ..io.ply import read_header, read_splats
 from ..scene import Manifest, ManifestError, box_corners_world, box_in_frustum, vehicle_local_box
 from .cache_key import inputs_key
 
-DIFFUSION_STAGES = ("restore", "harmonize")
+DIFFUSION_STAGES = ("inpaint", "restore", "harmonize")
 # Sub-effects decided here but applied inside another stage (no runner of their own); they are
 # cached exactly when their host stage is.
 APPLIED_INSIDE = {"cast_shadow": "render", "sh_eval": "render"}
@@ -233,6 +234,19 @@ def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: b
                          f"({drive['identity']})", train)
 
 
+def _inpaint(manifest: Manifest, in_window: list[int], windowed: bool) -> StageDecision:
+    """Inpaint what edits of recorded vehicles expose, in the frames they were edited."""
+    edits = {a.id: a.edited_frames() for a in manifest.actors if a.kind == "existing"}
+    edits = {aid: frames for aid, frames in edits.items() if frames}
+    if not edits:
+        return StageDecision("inpaint", False, "no recorded vehicle removed, moved or retimed")
+    frames = sorted({f for fs in edits.values() for f in fs if f in in_window})
+    if not frames:
+        return StageDecision("inpaint", False, "the edits of recorded vehicles lie outside the frame window")
+    return StageDecision("inpaint", True, f"{len(edits)} recorded vehicle(s) removed, moved or retimed: inpaint "
+                         f"what they leave{' in the frame window' if windowed else ''}", frames, sorted(edits))
+
+
 def _reconstruct(manifest: Manifest, frames: list[int]) -> StageDecision:
     if manifest.background_splats:
         return StageDecision("reconstruct", False, "background splats given")
@@ -263,6 +277,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     stages.append(StageDecision("render", True, "always" if window is None else "the frame window", in_window,
                                 sorted({a for cam in shown.values() for ids in cam.values() for a in ids})))
     stages.append(_cast_shadow(manifest, shown))
+    stages.append(_inpaint(manifest, in_window, window is not None))
 
     offsets = [float(o) for o in (eff.lateral_offsets if opt.offsets is None else opt.offsets)]
     stages.append(_adapt(manifest, opt, bool(offsets), stages[0].run))

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..diffusion.adapt import AdaptConfig
 from ..diffusion.config import SAMPLERS, RefineConfig, SamplerConfig
-from ..insertion.config import HarmonizeConfig, InsertionConfig
+from ..insertion.config import HarmonizeConfig, InpaintConfig, InsertionConfig
 from ..scene.ground_truth import has_insertion_truth, has_lateral_truth
 
 
@@ -41,6 +41,7 @@ class StageOptions:
     sampler: SamplerConfig = field(default_factory=lambda: replace(SAMPLERS["builtin"], max_memory_gib=4.0))
     refine: RefineConfig = field(default_factory=RefineConfig)
     harmonize: HarmonizeConfig = field(default_factory=HarmonizeConfig)
+    inpaint: InpaintConfig = field(default_factory=InpaintConfig)  # what edits of recorded vehicles expose
     insertion: InsertionConfig = field(default_factory=InsertionConfig)  # its training views and fine-tune
     adapt: AdaptConfig = field(default_factory=AdaptConfig)  # the restorer's fine-tune on this drive
 
@@ -203,6 +204,43 @@ def render_stage(ctx) -> StageResult:
     return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
 
 
+@stage("inpaint")
+def inpaint_stage(ctx) -> StageResult:
+    """RePaint over what the edits of recorded vehicles expose, in each frame they were edited:
+    their pixels where the drive saw them that no vehicle covers now, where no training frame saw
+    the street behind them."""
+    from tqdm import tqdm
+
+    from ..insertion.exposed import edited_here, inpaint_region
+    from ..insertion.harmonizer import restorer_harmonizer
+    from ..io.images import read_image, write_image, write_mask
+    from .outputs import ASSET_CACHE
+    from .scene_render import SceneRenderer
+
+    cfg = ctx.options.inpaint
+    renderer = SceneRenderer(ctx.manifest, device=ctx.device, asset_cache=ctx.tree.folder(ASSET_CACHE),
+                             background_gaussians=background(ctx), actor_gaussians=recorded_vehicles(ctx))
+    inpaint = restorer_harmonizer(restorer(ctx), cfg.harmonize, max_memory_gib=ctx.options.sampler.max_memory_gib)
+    jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("inpaint").frames]
+    pixels, n = 0, 0
+    for cam, fi in tqdm(jobs, desc="inpaint", unit="frame", disable=not ctx.progress):
+        path = ctx.tree.frame("inpaint", cam.name, fi)
+        if path.exists():
+            continue
+        recorded = renderer.render(cam.name, fi, recorded=True)
+        now = renderer.render(cam.name, fi)
+        street = renderer.render(cam.name, fi, [])
+        region = inpaint_region(ctx.manifest, renderer.view(cam.name, fi), recorded.instance, now.instance,
+                                edited_here(ctx.manifest, fi), street.depth, cfg.dilate_px)
+        if region is None:
+            continue
+        image = read_image(ctx.tree.frame("render", cam.name, fi), channels=3)
+        write_mask(ctx.tree.frame("inpaint", cam.name, fi, ".region.png"), region.astype(np.float32))
+        write_image(path, inpaint(image, region))
+        pixels, n = pixels + int(region.sum()), n + 1
+    return StageResult({"frames_inpainted": n, "pixels_inpainted": pixels})
+
+
 @stage("adapt")
 def adapt_stage(ctx) -> StageResult:
     """Fine-tune the shipped restorer on this drive's own pairs (the plan found its weights trained
@@ -354,7 +392,8 @@ def harmonize_stage(ctx) -> StageResult:
         region = _inserted_region(ctx, cam, fi)
         if path.exists() or region is None or not region.any():
             continue
-        image = read_image(ctx.tree.frame("render", cam.name, fi), channels=3)
+        inpainted = ctx.tree.frame("inpaint", cam.name, fi)  # an edit of a recorded vehicle filled first
+        image = read_image(inpainted if inpainted.exists() else ctx.tree.frame("render", cam.name, fi), channels=3)
         write_mask(ctx.tree.frame("harmonize", cam.name, fi, ".region.png"), region.astype(np.float32))
         write_image(path, harmonizer(image, region))
         n += 1

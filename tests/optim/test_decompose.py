@@ -8,96 +8,25 @@ import pytest
 import torch
 
 from symdrive_core import conventions
-from symdrive_core.eval.views import evaluate_heldout
-from symdrive_core.gaussians import Gaussians
-from symdrive_core.io.images import write_image
-from symdrive_core.io.points import write_points
+from symdrive_core.eval.views import evaluate_heldout, recorded_renderer
 from symdrive_core.metrics import psnr
 from symdrive_core.optim import decompose
 from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
-from symdrive_core.rotations import quat_from_yaw
-from symdrive_core.scene import Actor, Camera, CameraFrame, Frame, Manifest, Pose, load_manifest
+from symdrive_core.scene import Pose, load_manifest
 from symdrive_core.scene.camera import CameraView
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
 from tests.conftest import look_at_c2w
-from tests.optim.conftest import true_scene
-
-W, H = 64, 40
-WLH = np.array([1.6, 3.0, 1.2])
-N_FRAMES = 16
-
-
-def true_box(n_side: int = 15) -> Gaussians:
-    """The box's surface in its own frame: red front half, blue back half, a white roof."""
-    half = 0.5 * np.array([WLH[1], WLH[0], WLH[2]])
-    g = np.linspace(-1, 1, n_side)
-    pts = []
-    for axis in range(3):
-        a, b = [k for k in range(3) if k != axis]
-        u, v = np.meshgrid(g, g)
-        for sign in (-1, 1):
-            p = np.zeros((u.size, 3))
-            p[:, axis], p[:, a], p[:, b] = sign, u.ravel(), v.ravel()
-            pts.append(p)
-    pts = np.unique(np.concatenate(pts), axis=0) * half
-    colours = np.where(pts[:, :1] > 0, [0.85, 0.1, 0.1], [0.1, 0.2, 0.85])
-    colours[pts[:, 2] > 0.99 * half[2]] = 0.95
-    n = len(pts)
-    return Gaussians.from_activated(pts, np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), 0.1), np.full(n, 0.98),
-                                    colours)
-
-
-def street() -> Gaussians:
-    """The shared wall-and-floor scene with a flat floor (a thick one would hide the box's lower half
-    from every camera)."""
-    g = true_scene()
-    floor = g.means[:, 2] == 0.0
-    g.log_scales[floor, 2] = np.log(0.02)
-    return g
-
-
-def box_pose(i: int) -> Pose:
-    """Along +X at 0.9 m per frame (the camera makes 0.4), turning slightly, on the floor."""
-    return Pose(np.array([-3.0 + 0.9 * i, 2.8, 0.5 * WLH[2]]), quat_from_yaw(0.02 * i))
-
-
-def camera_c2w(i: int) -> np.ndarray:
-    return look_at_c2w((0.4 * i, -2.0, 1.6), (0.4 * i + 1.0, 6.0, 0.8))
+from tests.optim.moving_box import WLH, H, W, write_moving_box
 
 
 @pytest.fixture(scope="module")
 def moving_box_package(tmp_path_factory):
-    root = tmp_path_factory.mktemp("moving_box")
-    scene, box = street(), true_box()
-    bg, car = GaussianTensors.from_gaussians(scene), GaussianTensors.from_gaussians(box)
-    K = conventions.intrinsics_from_fov(W, H, np.deg2rad(75))
-    frames, cam_frames, truth = [], [], {}
-    for i in range(N_FRAMES):
-        c2w = camera_c2w(i)
-        view = CameraView(conventions.invert_rigid(c2w), K, W, H)
-        with torch.no_grad():
-            out = render_scene(bg, [(car, box_pose(i), 1)], view)
-            empty = render_scene(bg, [], view)
-        truth[i] = {"rgb": out["rgb"].clamp(0, 1).numpy(), "mask": out["instance"][..., 0].numpy() > 0.5,
-                    "background": empty["rgb"].clamp(0, 1).numpy()}
-        write_image(root / f"img/{i:03d}.png", truth[i]["rgb"])
-        frames.append(Frame(i, 0.1 * i))
-        cam_frames.append(CameraFrame(K, c2w, conventions.invert_rigid(c2w), f"img/{i:03d}.png"))
-    rng = np.random.default_rng(1)
-    write_points(root / "points.ply", scene.means + rng.normal(scale=0.05, size=scene.means.shape),
-                 np.clip(scene.base_colors, 0, 1))
-    heldout = list(range(2, N_FRAMES, 4))
-    actor = Actor("car_1", "existing", None, None, [box_pose(i) for i in range(N_FRAMES)], WLH, 1)
-    m = Manifest(name="moving-box", frames=frames, cameras=[Camera("front", W, H, cam_frames)], actors=[actor],
-                 background_points="points.ply",
-                 ground_truth={"train_frames": [i for i in range(N_FRAMES) if i not in heldout],
-                               "heldout_frames": heldout}, root=root)
-    m.save(root / "manifest.json")
-    return root, box, truth, heldout
+    return write_moving_box(tmp_path_factory.mktemp("moving_box"))
 
 
-def _cfg(**kw) -> ReconstructConfig:
+def fast_config(**kw) -> ReconstructConfig:
+    """A small budget that still separates the box from the street (about 10 s)."""
     base = {"iters": 600, "densify_from": 100, "densify_every": 100, "sky_points": 0, "actor_points": 600,
             "checkpoint_every": 10_000, "sh_degree": 0}
     return ReconstructConfig(**{**base, **kw})
@@ -108,8 +37,8 @@ def fits(moving_box_package, tmp_path_factory):
     root, *_ = moving_box_package
     m = load_manifest(root)
     out = tmp_path_factory.mktemp("fits")
-    return m, reconstruct(m, out / "decomposed", _cfg(), progress=False), reconstruct(
-        m, out / "static", _cfg(decompose=False), progress=False)
+    return m, reconstruct(m, out / "decomposed", fast_config(), progress=False), reconstruct(
+        m, out / "static", fast_config(decompose=False), progress=False)
 
 
 def _masked_psnr(pred, gt, mask):
@@ -178,7 +107,5 @@ def test_the_background_does_not_absorb_the_box(moving_box_package, fits):
 
 
 def _renderer(m, result):
-    from symdrive_core.eval.views import recorded_renderer
-
     render = recorded_renderer(m, result.gaussians, result.actors)
     return lambda i: render(CameraView.of_frame(m.cameras[0], i), i)

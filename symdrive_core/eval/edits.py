@@ -1,0 +1,144 @@
+"""Moving traffic against its Cycles truth: a decomposed reconstruction's held-out frames (over
+the image and over the moving vehicles' pixels), and edits of recorded vehicles (remove, move,
+retime) rendered with and without inpainting of what they expose.
+
+Scores are PSNR in dB over masks (:func:`symdrive_core.metrics.psnr` on the masked pixels). The
+package's ``ground_truth.vehicles`` and ``ground_truth.edits`` hold the truth
+(:mod:`symdrive_core.scene.ground_truth`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from ..gaussians import Gaussians
+from ..insertion.exposed import VEHICLE_ALPHA, exposed_region, inpaint_region
+from ..io.images import read_image, read_mask
+from ..metrics import psnr
+from ..scene import Manifest
+from ..scene.camera import CameraView
+from ..scene.ground_truth import EditTruth, edit_truth, require_truth, split_frames, vehicle_masks
+from ..splat.render import render_scene
+from ..splat.tensors import GaussianTensors
+
+Inpainter = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+class TrafficRenderer:
+    """Background plus recorded vehicles, each Gaussian set converted once."""
+
+    def __init__(self, manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians]):
+        self.manifest = manifest
+        self.background = GaussianTensors.from_gaussians(background)
+        self.actors = {k: GaussianTensors.from_gaussians(g) for k, g in actors.items()}
+
+    @torch.no_grad()
+    def render(self, manifest: Manifest, camera: str, frame: int, recorded: bool = False):
+        """(rgb [H, W, 3], actor id -> alpha [H, W]) of ``manifest``'s actors at ``frame``: as
+        edited, or where the drive saw them (``recorded``)."""
+        placed, ids = [], {}
+        for a in manifest.actors:
+            pose = a.recorded_pose(frame) if recorded else a.pose(frame)
+            if a.id in self.actors and pose is not None:
+                placed.append((self.actors[a.id], pose, a.instance_id))
+                ids[a.instance_id] = a.id
+        out = render_scene(self.background, placed, CameraView.of_frame(manifest.camera(camera), frame))
+        alphas = {ids[iid]: out["instance"][..., k].numpy() for k, iid in enumerate(out["actor_ids"])}
+        return out["rgb"].clamp(0, 1).numpy(), alphas
+
+    @torch.no_grad()
+    def street_depth(self, manifest: Manifest, camera: str, frame: int) -> np.ndarray:
+        """The background's camera z at ``frame`` (0 where nothing is rendered)."""
+        return render_scene(self.background, [], CameraView.of_frame(manifest.camera(camera), frame))["depth"][
+            ..., 0].numpy()
+
+
+def _masked(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float | None:
+    return float(psnr(pred[mask], truth[mask])) if mask.any() else None
+
+
+def _mean(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return round(float(np.mean(values)), 3) if values else None
+
+
+def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
+                           frames: list[int] | None = None) -> dict:
+    """Held-out frames: PSNR over the image, over the moving vehicles' pixels and elsewhere (the
+    truth's vehicle masks), the recorded vehicles at their recorded poses."""
+    require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
+    masks = vehicle_masks(manifest)
+    frames = [f for f in (split_frames(manifest)[1] if frames is None else frames) if f in masks]
+    cam = manifest.cameras[0]
+    renderer = TrafficRenderer(manifest, background, actors)
+    rows = {"image": [], "vehicles": [], "elsewhere": []}
+    for f in frames:
+        rgb, _ = renderer.render(manifest, cam.name, f, recorded=True)
+        truth = read_image(manifest.resolve(cam.frames[f].image), channels=3)
+        vehicles = read_mask(manifest.resolve(masks[f])) > 0.5
+        rows["image"].append(float(psnr(rgb, truth)))
+        rows["vehicles"].append(_masked(rgb, truth, vehicles))
+        rows["elsewhere"].append(_masked(rgb, truth, ~vehicles))
+    return {"frames": len(frames), **{f"psnr_{k}": _mean(v) for k, v in rows.items()}}
+
+
+def edited(manifest: Manifest, edit: EditTruth) -> Manifest:
+    """``manifest`` with ``edit`` applied at its frame: the actor removed there (remove) or at the
+    truth's edited pose (move, retime), its recorded poses kept."""
+    actors = []
+    for a in manifest.actors:
+        if a.id == edit.actor:
+            poses = list(a.poses)
+            poses[edit.frame] = edit.pose
+            a = replace(a, poses=poses, recorded_poses=list(a.recorded_poses or a.poses))
+        actors.append(a)
+    return replace(manifest, actors=actors)
+
+
+def evaluate_edits(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
+                   inpaint: Inpainter | None = None, dilate_px: int = 2) -> dict:
+    """Per edit kind, the edited frame against Cycles' (``ground_truth.edits``): PSNR over the
+    region the edit exposes (remove: the car's recorded pixels; move, retime: where it was and no
+    vehicle is now) and, for move and retime, over the car where the truth shows it now; as
+    rendered ("dropped": the car's Gaussians moved or gone) and, with ``inpaint``, with the exposed
+    region inpainted."""
+    require_truth(manifest, "edits", "scoring edits needs their Cycles renders")
+    renderer = TrafficRenderer(manifest, background, actors)
+    rows: dict[str, dict[str, list]] = {}
+    for e in edit_truth(manifest):
+        m = edited(manifest, e)
+        _, recorded = renderer.render(m, e.camera, e.frame, recorded=True)
+        rgb, now = renderer.render(m, e.camera, e.frame)
+        region = exposed_region(recorded, now, [e.actor], dilate_px)
+        region = np.zeros(rgb.shape[:2], bool) if region is None else region
+        hole = inpaint_region(m, CameraView.of_frame(m.camera(e.camera), e.frame), recorded, now, [e.actor],
+                              renderer.street_depth(m, e.camera, e.frame), dilate_px)
+        truth = read_image(manifest.resolve(e.image), channels=3)
+        car = read_mask(manifest.resolve(e.mask)) > 0.5
+        row = rows.setdefault(e.kind, {})
+        score_region = car if e.kind == "remove" else region & ~car
+        row.setdefault("exposed_dropped", []).append(_masked(rgb, truth, score_region))
+        row.setdefault("unseen_fraction", []).append(
+            float((hole & score_region).sum() / max(score_region.sum(), 1)) if hole is not None else 0.0)
+        if inpaint is not None:
+            filled = inpaint(rgb, hole) if hole is not None else rgb
+            row.setdefault("exposed_inpainted", []).append(_masked(filled, truth, score_region))
+        if e.kind != "remove":
+            row.setdefault("car", []).append(_masked(rgb, truth, car))
+            row.setdefault("car_silhouette_iou", []).append(_iou(now.get(e.actor), car))
+    return {kind: {"edits": len(next(iter(r.values()))),
+                   **{k if k in UNSCALED else f"psnr_{k}": _mean(v) for k, v in r.items()}} for kind, r in rows.items()}
+
+
+UNSCALED = {"car_silhouette_iou", "unseen_fraction"}
+
+
+def _iou(alpha: np.ndarray | None, truth: np.ndarray) -> float | None:
+    if alpha is None or not truth.any():
+        return None
+    mine = alpha >= VEHICLE_ALPHA
+    return float((mine & truth).sum() / (mine | truth).sum())
