@@ -97,6 +97,21 @@ def make_package(tmp_path):
     return _make
 
 
+@pytest.fixture(scope="session")
+def moving_box(tmp_path_factory):
+    """The moving-box drive (:mod:`tests.optim.moving_box`) reconstructed once with a small budget:
+    (package root, ReconstructResult, per-frame truth, the box's true Gaussians, held-out frames).
+    Tests that edit the package copy it."""
+    from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
+    from symdrive_core.scene import load_manifest
+    from tests.optim.moving_box import write_moving_box
+
+    root, box, truth, heldout = write_moving_box(tmp_path_factory.mktemp("moving_box") / "pkg")
+    cfg = ReconstructConfig(iters=600, densify_from=100, densify_every=100, sky_points=0, actor_points=600,
+                            checkpoint_every=10_000, sh_degree=0)
+    return root, reconstruct(load_manifest(root), root / "reconstruction", cfg, progress=False), truth, box, heldout
+
+
 def _end_now(status: int) -> None:
     for stream in (sys.stdout, sys.stderr):
         try:

@@ -13,7 +13,6 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-import torch
 
 from ..gaussians import Gaussians
 from ..insertion.exposed import VEHICLE_ALPHA, exposed_region, inpaint_region
@@ -22,39 +21,9 @@ from ..metrics import psnr
 from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..scene.ground_truth import EditTruth, edit_truth, require_truth, split_frames, vehicle_masks
-from ..splat.render import render_scene
-from ..splat.tensors import GaussianTensors
+from .views import TrafficRenderer
 
 Inpainter = Callable[[np.ndarray, np.ndarray], np.ndarray]
-
-
-class TrafficRenderer:
-    """Background plus recorded vehicles, each Gaussian set converted once."""
-
-    def __init__(self, manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians]):
-        self.manifest = manifest
-        self.background = GaussianTensors.from_gaussians(background)
-        self.actors = {k: GaussianTensors.from_gaussians(g) for k, g in actors.items()}
-
-    @torch.no_grad()
-    def render(self, manifest: Manifest, camera: str, frame: int, recorded: bool = False):
-        """(rgb [H, W, 3], actor id -> alpha [H, W]) of ``manifest``'s actors at ``frame``: as
-        edited, or where the drive saw them (``recorded``)."""
-        placed, ids = [], {}
-        for a in manifest.actors:
-            pose = a.recorded_pose(frame) if recorded else a.pose(frame)
-            if a.id in self.actors and pose is not None:
-                placed.append((self.actors[a.id], pose, a.instance_id))
-                ids[a.instance_id] = a.id
-        out = render_scene(self.background, placed, CameraView.of_frame(manifest.camera(camera), frame))
-        alphas = {ids[iid]: out["instance"][..., k].numpy() for k, iid in enumerate(out["actor_ids"])}
-        return out["rgb"].clamp(0, 1).numpy(), alphas
-
-    @torch.no_grad()
-    def street_depth(self, manifest: Manifest, camera: str, frame: int) -> np.ndarray:
-        """The background's camera z at ``frame`` (0 where nothing is rendered)."""
-        return render_scene(self.background, [], CameraView.of_frame(manifest.camera(camera), frame))["depth"][
-            ..., 0].numpy()
 
 
 def _masked(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float | None:
@@ -74,7 +43,7 @@ def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: di
     masks = vehicle_masks(manifest)
     frames = [f for f in (split_frames(manifest)[1] if frames is None else frames) if f in masks]
     cam = manifest.cameras[0]
-    renderer = TrafficRenderer(manifest, background, actors)
+    renderer = TrafficRenderer(background, actors)
     rows = {"image": [], "vehicles": [], "elsewhere": []}
     for f in frames:
         rgb, _ = renderer.render(manifest, cam.name, f, recorded=True)
@@ -107,7 +76,7 @@ def evaluate_edits(manifest: Manifest, background: Gaussians, actors: dict[str, 
     rendered ("dropped": the car's Gaussians moved or gone) and, with ``inpaint``, with the exposed
     region inpainted."""
     require_truth(manifest, "edits", "scoring edits needs their Cycles renders")
-    renderer = TrafficRenderer(manifest, background, actors)
+    renderer = TrafficRenderer(background, actors)
     rows: dict[str, dict[str, list]] = {}
     for e in edit_truth(manifest):
         m = edited(manifest, e)

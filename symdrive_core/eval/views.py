@@ -48,16 +48,38 @@ def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str
     if not actors:
         static = SplatRenderer(gaussians)
         return lambda view, frame: static(view)
-    background = GaussianTensors.from_gaussians(gaussians)
-    placed = {a.id: (GaussianTensors.from_gaussians(actors[a.id]), a) for a in manifest.actors if a.id in actors}
+    scene = TrafficRenderer(gaussians, actors)
+    return lambda view, frame: scene.render(manifest, None, frame, view=view, recorded=True)[0]
+
+
+class TrafficRenderer:
+    """Background plus recorded vehicles (by actor id), each Gaussian set converted once."""
+
+    def __init__(self, background: Gaussians, actors: dict[str, Gaussians]):
+        self.background = GaussianTensors.from_gaussians(background)
+        self.actors = {k: GaussianTensors.from_gaussians(g) for k, g in actors.items()}
 
     @torch.no_grad()
-    def render(view: CameraView, frame: int) -> np.ndarray:
-        here = [(g, a.recorded_pose(frame), a.instance_id) for g, a in placed.values()
-                if a.recorded_pose(frame) is not None]
-        return render_scene(background, here, view)["rgb"].clamp(0, 1).numpy()
+    def render(self, manifest: Manifest, camera: str | None, frame: int, *, view: CameraView | None = None,
+               recorded: bool = False):
+        """(rgb [H, W, 3], actor id -> alpha [H, W]) of ``manifest``'s actors at ``frame``, seen by
+        ``camera`` at that frame (or ``view``): as edited, or where the drive saw them (``recorded``)."""
+        placed, ids = [], {}
+        for a in manifest.actors:
+            pose = a.recorded_pose(frame) if recorded else a.pose(frame)
+            if a.id in self.actors and pose is not None:
+                placed.append((self.actors[a.id], pose, a.instance_id))
+                ids[a.instance_id] = a.id
+        view = view or CameraView.of_frame(manifest.camera(camera), frame)
+        out = render_scene(self.background, placed, view)
+        alphas = {ids[iid]: out["instance"][..., k].numpy() for k, iid in enumerate(out["actor_ids"])}
+        return out["rgb"].clamp(0, 1).numpy(), alphas
 
-    return render
+    @torch.no_grad()
+    def street_depth(self, manifest: Manifest, camera: str, frame: int) -> np.ndarray:
+        """The background's camera z at ``frame`` (0 where nothing is rendered)."""
+        return render_scene(self.background, [], CameraView.of_frame(manifest.camera(camera), frame))["depth"][
+            ..., 0].numpy()
 
 
 def lateral_targets(manifest: Manifest, frames: list[int] | None, needed_by: str | None = None) -> list:

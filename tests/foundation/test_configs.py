@@ -46,9 +46,10 @@ def test_the_code_that_uses_each_config_names_the_same_class():
 def test_stage_options_compose_the_library_configs():
     options = StageOptions()
     composed = {f.name: getattr(options, f.name) for f in fields(options) if is_dataclass(getattr(options, f.name))}
-    assert set(composed) == {"sampler", "refine", "harmonize", "insertion", "adapt"}
+    assert set(composed) == {"sampler", "refine", "harmonize", "inpaint", "insertion", "adapt"}
     assert options.refine == diffusion_config.RefineConfig()
     assert options.harmonize == insertion_config.HarmonizeConfig()
+    assert options.inpaint == insertion_config.InpaintConfig()
     assert options.insertion == insertion_config.InsertionConfig()
     assert options.adapt == AdaptConfig()
     # the built-in backend's sampler, with the run's fixed memory budget

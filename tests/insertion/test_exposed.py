@@ -5,14 +5,11 @@ the unseen part on a scene whose truth is known."""
 import numpy as np
 import pytest
 
-from symdrive_core.eval.edits import TrafficRenderer
+from symdrive_core.eval.views import TrafficRenderer
 from symdrive_core.insertion.exposed import _segment_hits_box, exposed_region, inpaint_region
-from symdrive_core.optim.reconstruct import reconstruct
 from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Pose, load_manifest
 from symdrive_core.scene.camera import CameraView
-from tests.optim.moving_box import write_moving_box
-from tests.optim.test_decompose import fast_config
 
 
 def test_segment_box_test_matches_dense_sampling():
@@ -41,13 +38,12 @@ def test_the_exposed_region_is_where_the_car_was_and_nothing_is_now():
 
 
 @pytest.fixture(scope="module")
-def removed_box(tmp_path_factory):
-    root, *_ = write_moving_box(tmp_path_factory.mktemp("box") / "pkg")
+def removed_box(moving_box):
+    root, result, *_ = moving_box
     m = load_manifest(root)
-    result = reconstruct(m, root / "rec", fast_config(), progress=False)
     car = m.actor("car_1")
     car.recorded_poses, car.poses = list(car.poses), [None] * len(car.poses)
-    return m, TrafficRenderer(m, result.gaussians, result.actors)
+    return m, TrafficRenderer(result.gaussians, result.actors)
 
 
 @pytest.mark.parametrize(("frame", "unseen"), [(0, True), (6, False)])

@@ -17,36 +17,25 @@ from symdrive_core.scene.camera import CameraView
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
 from tests.conftest import look_at_c2w
-from tests.optim.moving_box import WLH, H, W, write_moving_box
+from tests.optim.moving_box import WLH, H, W
 
 
 @pytest.fixture(scope="module")
-def moving_box_package(tmp_path_factory):
-    return write_moving_box(tmp_path_factory.mktemp("moving_box"))
-
-
-def fast_config(**kw) -> ReconstructConfig:
-    """A small budget that still separates the box from the street (about 10 s)."""
-    base = {"iters": 600, "densify_from": 100, "densify_every": 100, "sky_points": 0, "actor_points": 600,
-            "checkpoint_every": 10_000, "sh_degree": 0}
-    return ReconstructConfig(**{**base, **kw})
-
-
-@pytest.fixture(scope="module")
-def fits(moving_box_package, tmp_path_factory):
-    root, *_ = moving_box_package
+def fits(moving_box, tmp_path_factory):
+    """The shared small-budget decomposed fit, and a static one with the same budget."""
+    root, decomposed, *_ = moving_box
     m = load_manifest(root)
-    out = tmp_path_factory.mktemp("fits")
-    return m, reconstruct(m, out / "decomposed", fast_config(), progress=False), reconstruct(
-        m, out / "static", fast_config(decompose=False), progress=False)
+    static_cfg = ReconstructConfig(iters=600, densify_from=100, densify_every=100, sky_points=0, checkpoint_every=10_000,
+                                   sh_degree=0, decompose=False)
+    return m, decomposed, reconstruct(m, tmp_path_factory.mktemp("fits") / "static", static_cfg, progress=False)
 
 
 def _masked_psnr(pred, gt, mask):
     return psnr(pred[mask], gt[mask])
 
 
-def test_the_moving_box_is_sharper_decomposed_than_static(moving_box_package, fits):
-    _, _, truth, heldout = moving_box_package
+def test_the_moving_box_is_sharper_decomposed_than_static(moving_box, fits):
+    _, _, truth, _, heldout = moving_box
     m, decomposed, static = fits
     assert set(decomposed.actors) == {"car_1"} and static.actors == {}
     render_d = _renderer(m, decomposed)
@@ -65,9 +54,9 @@ def test_the_moving_box_is_sharper_decomposed_than_static(moving_box_package, fi
     assert score > evaluate_heldout(m, static.gaussians, heldout)["psnr_heldout"]
 
 
-def test_the_box_is_learnt_in_its_own_frame(moving_box_package, fits):
+def test_the_box_is_learnt_in_its_own_frame(moving_box, fits):
     """Seen alone from views around it that no frame recorded, the fitted box looks like the truth."""
-    _, box, _, _ = moving_box_package
+    box = moving_box[3]
     _, decomposed, _ = fits
     fitted, true = GaussianTensors.from_gaussians(decomposed.actors["car_1"]), GaussianTensors.from_gaussians(box)
     K = conventions.intrinsics_from_fov(W, H, np.deg2rad(60))
@@ -86,10 +75,10 @@ def test_the_box_is_learnt_in_its_own_frame(moving_box_package, fits):
     assert decompose.inside_box(local, 0.5 * WLH[[1, 0, 2]]).all()
 
 
-def test_the_background_does_not_absorb_the_box(moving_box_package, fits):
+def test_the_background_does_not_absorb_the_box(moving_box, fits):
     """The background alone is the scene without the box (where frames saw the floor), and holds
     nothing inside the volume the box swept."""
-    _, _, truth, heldout = moving_box_package
+    _, _, truth, _, heldout = moving_box
     m, decomposed, static = fits
     t = decompose.tracks(m)
     assert not decompose.in_swept_boxes(decomposed.gaussians.means, t).any()
