@@ -55,6 +55,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import check_regular, open_regular
 from ..rotations import quat_to_matrix
+from ..scene.fields import FieldReader
 from ..scene.manifest import COORD_MAX, ID_MAX, WLH_MAX, Actor, parse_manifest
 from ..scene.paths import check_name
 from ..scene.poses import Pose
@@ -127,46 +128,23 @@ def _from_kitti_axes(bottom: np.ndarray, rotation: np.ndarray, h: float) -> tupl
 # ---------------------------------------------------------------- JSON
 
 
-class _Fields:
-    """Typed reads of a parsed JSON document, every error naming the file and the field."""
+class _Fields(FieldReader):
+    """The manifest's field reader with a closed object (unknown keys refused), element-wise
+    named vectors and frame indices."""
 
-    def __init__(self, path: Path):
-        self.path = path
-
-    def fail(self, where: str, message: str):
-        raise InputError(self.path, message, where)
-
-    def obj(self, v, where: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
-        if not isinstance(v, dict):
-            self.fail(where, f"expected an object, got {type(v).__name__}")
+    def closed_obj(self, v, where: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+        v = self.obj(v, where)
         for k in required:
-            if k not in v:
-                self.fail(f"{where}.{k}" if where else k, "required field is missing")
+            self.key(v, k, where)
         for k in v:
             if k not in required + optional:
                 self.fail(f"{where}.{k}" if where else str(k), "unknown field")
         return v
 
-    def lst(self, v, where: str) -> list:
-        if not isinstance(v, list):
-            self.fail(where, f"expected a list, got {type(v).__name__}")
-        return v
-
-    def number(self, v, where: str) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(where, f"expected a finite number, got {v!r}")
-        try:
-            x = float(v)
-        except OverflowError:  # an integer too large for a float
-            x = float("inf")
-        if not np.isfinite(x):
-            self.fail(where, f"expected a finite number, got {v!r}")
-        return x
-
     def vector(self, v, n: int, where: str) -> np.ndarray:
         if not isinstance(v, list) or len(v) != n:
             self.fail(where, f"expected {n} numbers")
-        return np.array([self.number(x, f"{where}[{i}]") for i, x in enumerate(v)])
+        return np.array([self.num(x, f"{where}[{i}]") for i, x in enumerate(v)])
 
     def frame(self, v, where: str) -> int:
         if isinstance(v, bool) or not isinstance(v, int) or v < 0:
@@ -191,7 +169,7 @@ def _json_rotation(fields: _Fields, box: dict, where: str, frame: str) -> np.nda
     if ("yaw" in box) == ("quaternion" in box):
         fields.fail(where, "expected one of yaw or quaternion")
     if "yaw" in box:
-        yaw = fields.number(box["yaw"], f"{where}.yaw")
+        yaw = fields.num(box["yaw"], f"{where}.yaw")
         return _kitti_r_y(yaw) if frame == "camera" else _yaw_z(yaw)
     q = fields.vector(box["quaternion"], 4, f"{where}.quaternion")
     if np.linalg.norm(q) < 1e-8:
@@ -200,13 +178,13 @@ def _json_rotation(fields: _Fields, box: dict, where: str, frame: str) -> np.nda
 
 
 def _json_track(fields: _Fields, t, where: str, frame: str) -> Track:
-    t = fields.obj(t, where, ("id", "w", "l", "h", "boxes"))
+    t = fields.closed_obj(t, where, ("id", "w", "l", "h", "boxes"))
     tid = check_name(t["id"], f"{where}.id", fields.path)
-    wlh = np.array([_check_size(fields, fields.number(t[k], f"{where}.{k}"), f"{where}.{k}") for k in "wlh"])
+    wlh = np.array([_check_size(fields, fields.num(t[k], f"{where}.{k}"), f"{where}.{k}") for k in "wlh"])
     boxes, seen = [], set()
     for j, b in enumerate(fields.lst(t["boxes"], f"{where}.boxes")):
         wb = f"{where}.boxes[{j}]"
-        b = fields.obj(b, wb, ("frame", "centre"), ("yaw", "quaternion"))
+        b = fields.closed_obj(b, wb, ("frame", "centre"), ("yaw", "quaternion"))
         fi = fields.frame(b["frame"], f"{wb}.frame")
         if fi in seen:
             fields.fail(f"{wb}.frame", f"track {tid!r} has a box in frame {fi} already")
@@ -238,7 +216,7 @@ def read_tracks_json(path: Path) -> Tracks:
     """Tracks from the JSON format above, their boxes in 3DRealCar terms in the file's frame."""
     path = Path(path)
     fields = _Fields(path)
-    d = fields.obj(_load_json(path), "", ("frame", "tracks"))
+    d = fields.closed_obj(_load_json(path), "", ("frame", "tracks"))
     frame = d["frame"]
     if frame not in TRACK_FRAMES:
         fields.fail("frame", f"expected one of {', '.join(TRACK_FRAMES)}, got {frame!r}")

@@ -21,7 +21,7 @@ def test_full_scene_runs_every_effect(make_package):
     plan = make_plan(m)
     # no recorded images: nothing to refine against or adapt the restorer on
     assert _stages(plan) == {"reconstruct": False, "render": True, "adapt": False, "restore": True, "refine": False,
-                             "harmonize": True, "cast_shadow": True, "finetune": True,
+                             "harmonize": True, "cast_shadow": True, "inpaint": False, "finetune": True,
                              "sh_eval": True, "evaluate": False}
     assert plan.stage("refine").reason == "no recorded images to refine against"
     assert plan.needs_diffusion
@@ -130,7 +130,8 @@ def test_plan_command_json(make_package, capsys):
     assert main(["plan", str(make_package(lateral=(0.5,))), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["needs_diffusion"] is True
-    assert [s["name"] for s in data["stages"]][:5] == ["reconstruct", "render", "cast_shadow", "adapt", "restore"]
+    assert [s["name"] for s in data["stages"]][:6] == ["reconstruct", "render", "cast_shadow", "inpaint", "adapt",
+                                                       "restore"]
 
 
 def test_sh_degree_of_a_compressed_ply_comes_from_its_sh_element(tmp_path):
