@@ -13,6 +13,8 @@ has a mask of their visible pixels, and each held-out frame where one shows enou
 again with it removed, moved one lane across and 0.5 s later. ``ground_truth`` in
 ``manifest.json`` indexes all of it (see ``symdrive_core.scene.ground_truth``). Same seed and
 settings give the same scene and cameras; ``--traffic 0`` is the street without traffic.
+With ``--parked-existing`` the parked cars in view of the drive are existing actors too
+(``world.parked``), and each held-out frame is rendered again without its most visible one.
 """
 
 from __future__ import annotations
@@ -50,6 +52,10 @@ def parse_args(argv=None):
                         "removing, moving and retiming them on held-out frames)")
     p.add_argument("--edit-pixels", type=int, default=200,
                    help="least visible pixels of a traffic car for a held-out frame's edit truth")
+    p.add_argument("--parked-existing", action="store_true",
+                   help="the parked cars in view of the drive become existing actors too (ids parked_<k>, the same "
+                        "pose in every frame, no assets), and each held-out frame gets a remove edit of its most "
+                        "visible parked car (at least --edit-pixels); gt/vehicles stays the moving traffic only")
     p.add_argument("--save-blend", action="store_true", help="also save world.blend in the package")
     return p.parse_args(argv)
 

@@ -13,6 +13,7 @@ Layout (paths relative to the package):
     gt/insertion/00/shadow.png   its hard-shadow region (sunny scenes only)
     gt/vehicles/000000.png       the moving traffic's visible pixels in a drive frame (--traffic)
     gt/edits/00/image.png        a held-out frame with one traffic car removed, moved or retimed
+                                 (--parked-existing: also one parked car removed per held-out frame)
     gt/edits/00/mask.png         that car's visible mask (edited render; for remove, the recorded one)
     background/points.ply        surface samples coloured from the training images
     assets/<kind>/{mesh.obj, mesh.mtl, splats.ply, wlh.json}
@@ -37,6 +38,7 @@ from . import drive, lanes, render
 from .assets import export_car
 from .insertion import place_object, placement_pose, shadow_mask
 from .meshdata import scene_triangles
+from .parked import Parked
 from .street import LANE_WIDTH, LANES, build_street
 from .traffic import EDIT_KINDS, RETIME_S, TRAFFIC_INDEX, Traffic, ego_vehicle
 from .vehicles import ASSET_PAINTS, PRESETS, build_car
@@ -75,6 +77,10 @@ class PackageWriter:
         self.vehicle_pixels: dict[int, np.ndarray] = {}  # frame -> visible pixels of each traffic car
         self.heldout_index: dict[int, np.ndarray] = {}  # held-out frame -> its object-index pass
         self.edits: list[dict] = []
+        # --parked-existing: the parked cars in view, pass indices after the traffic's
+        self.parked = Parked(self.street.parked, TRAFFIC_INDEX + args.traffic, self.poses, self.K, args.width,
+                             args.height) if getattr(args, "parked_existing", False) else None
+        self.parked_pixels: dict[int, np.ndarray] = {}  # held-out frame -> visible pixels of each parked car
 
     # ------------------------------------------------------------------ assets and renders
     def _make_assets(self) -> dict:
@@ -113,6 +119,8 @@ class PackageWriter:
                  for k in range(self.args.placements)]
         if self.traffic is not None:
             jobs += [lambda f=f, kind=kind: self._edit(f, kind) for f in self.heldout for kind in EDIT_KINDS]
+        if self.parked is not None:
+            jobs += [lambda f=f: self._parked_remove(f) for f in self.heldout]
         return jobs
 
     def _train(self, i: int) -> None:
@@ -122,12 +130,15 @@ class PackageWriter:
         self.train_images[i], self.train_depths[i] = out["rgb"], out["depth"]
         if self.traffic is not None:
             self._vehicle_mask(i, out["index"])
+        if self.parked is not None and i in self.heldout:
+            self.heldout_index[i] = out["index"]
+            self.parked_pixels[i] = self.parked.pixels(out["index"])
         self.lanes_recorded[i] = self._lane_mask(self.poses[i], lanes.recorded_path(i))
 
     def _vehicle_mask(self, i: int, index: np.ndarray) -> None:
         """The traffic's visible pixels in drive frame ``i``, and each car's count (edits pick by it)."""
         rel = f"gt/vehicles/{i:06d}.png"
-        write_mask(self.root / rel, index >= TRAFFIC_INDEX)
+        write_mask(self.root / rel, (index >= TRAFFIC_INDEX) & (index < TRAFFIC_INDEX + len(self.traffic)))
         self.vehicle_masks[i] = rel
         self.vehicle_pixels[i] = np.bincount(index.ravel(), minlength=TRAFFIC_INDEX + len(self.traffic))[
             TRAFFIC_INDEX:TRAFFIC_INDEX + len(self.traffic)]
@@ -204,6 +215,31 @@ class PackageWriter:
                            "image": f"{base}/image.png", "mask": f"{base}/mask.png",
                            "pose": None if pose is None else pose.to_json(), **extra, "mask_pixels": int(mask.sum())})
 
+    def _parked_remove(self, frame: int) -> None:
+        """Held-out ``frame`` rendered again without its most visible parked car (at least
+        ``--edit-pixels``) that no other edit of the frame is about; its mask is the car's visible
+        pixels in the recorded frame."""
+        used = {e["actor"] for e in self.edits if e["frame"] == frame}
+        pixels = self.parked_pixels[frame]
+        free = [k for k in range(len(self.parked))
+                if self.parked.actor_id(k) not in used and pixels[k] >= self.args.edit_pixels]
+        if not free:
+            return
+        k = max(free, key=lambda j: (pixels[j], -j))
+        obj = self.parked.objects[k]
+        obj.hide_render = True
+        try:
+            out = self._render(self.poses[frame], frame)
+        finally:
+            obj.hide_render = False
+        mask = self.parked.mask(self.heldout_index[frame], k)
+        base = f"gt/edits/{len(self.edits):02d}"
+        write_image(self.root / f"{base}/image.png", out["rgb"])
+        write_mask(self.root / f"{base}/mask.png", mask)
+        self.edits.append({"kind": "remove", "actor": self.parked.actor_id(k), "camera": "front", "frame": frame,
+                           "image": f"{base}/image.png", "mask": f"{base}/mask.png", "pose": None,
+                           "mask_pixels": int(mask.sum())})
+
     # ------------------------------------------------------------------ point cloud, manifest
     def _point_cloud(self) -> str:
         """Scene surfaces sampled (denser near the drive), kept where a training image sees them."""
@@ -238,6 +274,7 @@ class PackageWriter:
                                 poses, np.array(ins["wlh"]), k + 1))
             masks.append(MaskEntry("front", ins["frame"], ins["actor"], visible=ins["mask"]))
         actors += self._traffic_actors(len(actors) + 1)
+        actors += self._parked_actors(len(actors) + 1)
         sunny = self.street.sun_direction is not None
         ground_truth = {
             "camera": "front",
@@ -264,6 +301,9 @@ class PackageWriter:
                                                                       for i in sorted(self.vehicle_masks)}}
             ground_truth["edits"] = self.edits
             ground_truth["generator"].update(traffic=a.traffic, edit_pixels=a.edit_pixels)
+        if self.parked is not None:
+            ground_truth["edits"] = self.edits
+            ground_truth["generator"].update(edit_pixels=a.edit_pixels)  # its schema has no parked field
         return Manifest(
             name=f"street-{a.seed}{'-overcast' if a.overcast else ''}", frames=frames,
             cameras=[Camera("front", a.width, a.height, cam_frames)], actors=actors,
@@ -279,6 +319,15 @@ class PackageWriter:
             return []
         return [Actor(f"car_{k}", "existing", None, None, poses, np.array(self.traffic.wlh(k)), first_id + k)
                 for k, poses in enumerate(self.traffic.poses)]
+
+    def _parked_actors(self, first_id: int) -> list[Actor]:
+        """The parked cars in view as existing actors: the same pose in every frame, measured size,
+        no assets."""
+        if self.parked is None:
+            return []
+        nf = self.args.frames
+        return [Actor(self.parked.actor_id(k), "existing", None, None, [pose] * nf,
+                      np.array(self.parked.sizes[k]), first_id + k) for k, pose in enumerate(self.parked.poses)]
 
     @property
     def renders(self) -> int:

@@ -37,6 +37,7 @@ class Street:
     amp: float
     period: float
     background: list = field(default_factory=list)  # objects of the static scene
+    parked: list = field(default_factory=list)  # the parked cars (also in ``background``), in build order
     sun_direction: np.ndarray | None = None  # direction the light travels, world, unit
 
     def centre_y(self, x):
@@ -219,7 +220,8 @@ def build_street(seed: int, overcast: bool, drive_end_x: float) -> Street:
     street.background += _road(street, col)
     street.background += _buildings(street, rng, col)
     street.background += _props(street, rng, col)
-    street.background += _parked_cars(street, rng, col, drive_end_x)
+    street.parked = _parked_cars(street, rng, col, drive_end_x)
+    street.background += street.parked
     elevation, azimuth = math.radians(38.0), math.radians(rng.uniform(35, 60))
     _, street.sun_direction = _sun(overcast, elevation, azimuth)
     scene = bpy.context.scene

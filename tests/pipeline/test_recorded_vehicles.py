@@ -98,3 +98,20 @@ def test_a_recorded_car_without_gaussians_stops_the_plan(reconstructed, tmp_path
     assert main(["plan", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "car_1" in err[0] and "actors[0].assets" in err[0]
+
+
+def test_the_shipped_traffic_street_plans_its_recorded_vehicles():
+    """The shipped package with moving traffic: every file there, four recorded cars to fit in their
+    own frames, and the truth of its edits readable."""
+    from pathlib import Path
+
+    from symdrive_core.scene import check_files
+    from symdrive_core.scene.ground_truth import edit_truth, vehicle_masks
+
+    root = Path(__file__).resolve().parents[2] / "symdrive_core" / "data" / "traffic_street"
+    m = load_manifest(root)
+    check_files(m)
+    plan = make_plan(m)
+    assert plan.runs("reconstruct") and plan.stage("reconstruct").actors == ["car_0", "car_1", "car_2", "car_3"]
+    assert not plan.runs("inpaint") and not plan.needs_diffusion
+    assert {e.kind for e in edit_truth(m)} == {"remove", "move", "retime"} and len(vehicle_masks(m)) == 24

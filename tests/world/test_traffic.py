@@ -267,3 +267,39 @@ def test_a_wrong_edit_or_vehicle_entry_names_its_field(tmp_path, gt, field):
         _with_truth(tmp_path, gt)
     assert exc.value.field == field, str(exc.value)
 
+
+
+# ---------------------------------------------------------------- parked cars as existing actors
+
+@pytest.mark.blender
+def test_parked_cars_are_existing_actors_with_removal_truth(world, tmp_path):
+    """--parked-existing without traffic: the parked actors sit where Blender put the cars and a
+    held-out frame has a parked car removed (recorded mask, Cycles render without it)."""
+    from world.package import PackageWriter
+
+    args = load_script("make_world").parse_args([
+        "--out", "unused", "--width", "64", "--height", "36", "--frames", "4", "--samples", "4", "--offsets",
+        "--holdout-every", "3", "--placements", "0", "--points", "2000", "--asset-splats", "300",
+        "--edit-pixels", "5", "--parked-existing"])
+    writer = PackageWriter(tmp_path, args)
+    for job in writer.plan():
+        job()
+    writer.finish()
+    m = load_manifest(tmp_path)
+    check_files(m)
+    assert m.actors and all(a.kind == "existing" and a.id.startswith("parked_") for a in m.actors)
+    assert [a.instance_id for a in m.actors] == list(range(1, len(m.actors) + 1))
+    assert "vehicles" not in m.ground_truth
+    for actor, obj in zip(m.actors, writer.parked.objects):
+        assert np.allclose(actor.wlh, list(obj["wlh"]))
+        for pose in actor.poses:
+            assert np.allclose(pose.matrix(), np.array(obj.matrix_world), atol=1e-5)
+    removals = [e for e in edit_truth(m) if e.kind == "remove" and e.actor.startswith("parked_")]
+    assert removals
+    for e in removals:
+        assert m.resolve(e.image).is_file() and m.resolve(e.mask).is_file() and e.pose is None
+        car = read_mask(m.resolve(e.mask)) > 0.5
+        assert car.sum() == e.mask_pixels >= 5
+        without = read_image(m.resolve(e.image), channels=3)
+        recorded = read_image(m.resolve(m.cameras[0].frames[e.frame].image), channels=3)
+        assert np.abs(without - recorded)[car].mean() > 0.02
