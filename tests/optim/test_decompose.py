@@ -98,3 +98,23 @@ def test_the_background_does_not_absorb_the_box(moving_box, fits):
 def _renderer(m, result):
     render = recorded_renderer(m, result.gaussians, result.actors)
     return lambda i: render(CameraView.of_frame(m.cameras[0], i), i)
+
+
+def test_the_command_links_each_recorded_vehicle(tmp_path, capsys):
+    """``symdrive reconstruct`` points each fitted vehicle's ``assets.splats`` at its PLY;
+    ``--static`` fits none and leaves the vehicles without assets."""
+    import json
+
+    from symdrive_core.cli import main
+    from tests.optim.moving_box import write_moving_box
+
+    root, *_ = write_moving_box(tmp_path / "pkg")
+    static = tmp_path / "static"
+    assert main(["reconstruct", str(root), "--iters", "30", "--static", "--out", str(static), "--quiet"]) == 0
+    assert "actors" not in json.loads(capsys.readouterr().out) and not (static / "actors").exists()
+    assert load_manifest(root).actor("car_1").splats is None
+    assert main(["reconstruct", str(root), "--iters", "30", "--quiet"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    m = load_manifest(root)
+    assert summary["actors"]["car_1"]["gaussians"] > 100 and "heldout" in summary
+    assert m.actor("car_1").splats == "reconstruction/actors/car_1.ply" and m.background_splats
