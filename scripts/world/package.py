@@ -303,7 +303,7 @@ class PackageWriter:
             ground_truth["generator"].update(traffic=a.traffic, edit_pixels=a.edit_pixels)
         if self.parked is not None:
             ground_truth["edits"] = self.edits
-            ground_truth["generator"].update(edit_pixels=a.edit_pixels)  # its schema has no parked field
+            ground_truth["generator"].update(edit_pixels=a.edit_pixels, parked_existing=True)
         return Manifest(
             name=f"street-{a.seed}{'-overcast' if a.overcast else ''}", frames=frames,
             cameras=[Camera("front", a.width, a.height, cam_frames)], actors=actors,
