@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import IntProperty, StringProperty
+from bpy.props import BoolProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
 from .. import actors, existing, keyframes, prefs
@@ -29,11 +29,14 @@ class SYMDRIVE_OT_import_recorded_vehicles(bpy.types.Operator, ImportHelper):
 
     filename_ext = ".json"
     filter_glob: StringProperty(default="*.json", options={"HIDDEN"})
+    allow_external_assets: BoolProperty(
+        name="Allow External Assets", default=False,
+        description="Read asset files outside the package (a package exported without copying its assets names "
+                    "your own files); off, such a package is refused, naming the field")
 
     def execute(self, context):
         try:
-            # A package the add-on exported names the artist's own asset files, outside it.
-            manifest = scene_pkg.load_manifest(self.filepath, allow_external=True)
+            manifest = scene_pkg.load_manifest(self.filepath, allow_external=self.allow_external_assets)
             roots = existing.import_existing(context, manifest, max_points=prefs.default_max_points())
         except errors.SymDriveError as exc:
             self.report({"ERROR"}, str(exc))
