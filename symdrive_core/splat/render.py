@@ -57,7 +57,8 @@ def render_scene(background: GaussianTensors | None, placed: list, view: CameraV
                  antialiased: bool = False) -> dict:
     """A background plus actors ``placed`` as (Gaussians, Pose, instance id), seen by ``view``:
     :func:`render_layers`' dict."""
-    device = background.device if background is not None else (placed[0][0].device if placed else "cpu")
+    sets = [g for g in (background, *(p[0] for p in placed)) if g is not None]
+    device = sets[0].device if sets else (background_color.device if torch.is_tensor(background_color) else "cpu")
     layers = [] if background is None else [Layer(background)]
     for g, pose, instance_id in placed:
         layers.append(Layer(g, torch.as_tensor(pose.R, dtype=torch.float32, device=device),
