@@ -37,6 +37,14 @@ def actor_of(obj: bpy.types.Object | None) -> bpy.types.Object | None:
     return None
 
 
+def selected_actors(context, operator) -> set[bpy.types.Object]:
+    """The actor roots of the selected objects; an error reported on ``operator`` when there are none."""
+    roots = {actor_of(ob) for ob in context.selected_objects} - {None}
+    if not roots:
+        operator.report({"ERROR"}, "select at least one vehicle")
+    return roots
+
+
 def unique_actor_id(scene: bpy.types.Scene, wanted: str) -> str:
     # A plain name, as the manifest requires (no leading dot, no "..": ids become file names).
     base = re.sub(r"\.{2,}", ".", re.sub(r"[^A-Za-z0-9_.-]+", "_", wanted)).strip("_.")[:100] or "vehicle"

@@ -12,13 +12,6 @@ from ..core import errors
 from ..core import scene as scene_pkg
 
 
-def _selected_actors(context, op) -> set[bpy.types.Object]:
-    roots = {actors.actor_of(ob) for ob in context.selected_objects} - {None}
-    if not roots:
-        op.report({"ERROR"}, "select at least one vehicle")
-    return roots
-
-
 class SYMDRIVE_OT_import_recorded_vehicles(bpy.types.Operator, ImportHelper):
     """Import the vehicles a scene package's drive recorded (its existing actors), keyed on their
     poses from the scene's start frame, to edit them"""
@@ -67,7 +60,7 @@ class SYMDRIVE_OT_remove_vehicle(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        roots = _selected_actors(context, self)
+        roots = actors.selected_actors(context, self)
         if not roots:
             return {"CANCELLED"}
         for root in roots:
@@ -86,7 +79,7 @@ class SYMDRIVE_OT_shift_vehicle_keys(bpy.types.Operator):
     frames: IntProperty(name="Frames", default=1, description="Positive: later; negative: earlier")
 
     def execute(self, context):
-        roots = _selected_actors(context, self)
+        roots = actors.selected_actors(context, self)
         if not roots:
             return {"CANCELLED"}
         for root in roots:

@@ -78,9 +78,8 @@ class SYMDRIVE_OT_key_pose(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        roots = {actors.actor_of(ob) for ob in context.selected_objects} - {None}
+        roots = actors.selected_actors(context, self)
         if not roots:
-            self.report({"ERROR"}, "select at least one vehicle")
             return {"CANCELLED"}
         frame = context.scene.frame_current
         for root in roots:
