@@ -202,7 +202,7 @@ def kitti_file(path, m, frame_offset: int = 0, shift=np.zeros(3)):
 
 def _shifted(line: str, shift) -> str:
     words = line.split()
-    words[13:16] = [repr(float(v) + s) for v, s in zip(words[13:16], shift)]
+    words[13:16] = [repr(float(v) + float(s)) for v, s in zip(words[13:16], shift)]
     return " ".join(words)
 
 
