@@ -112,20 +112,3 @@ def colour_from_views(track: Track, local: np.ndarray, views) -> np.ndarray:
         for k, c in zip(ok, image[v[ok].astype(int), u[ok].astype(int)]):
             samples[k].append(c)
     return np.array([np.median(s, axis=0) if s else np.full(3, 0.5) for s in samples], np.float64)
-
-
-def box_pixels(track: Track, frame: int, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int):
-    """(y0, y1, x0, x1) of the track's box projected at ``frame``, clipped to the image, or None
-    when it is behind the camera or outside."""
-    p = track.poses[frame]
-    if p is None:
-        return None
-    corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T * track.half
-    cam = (corners @ p.R.T + p.translation) @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
-    if np.any(cam[:, 2] <= 0.1):
-        return None
-    uv = cam[:, :2] / cam[:, 2:] * np.array([K[0, 0], K[1, 1]]) + K[:2, 2]
-    x0, y0 = np.floor(uv.min(0)).astype(int)
-    x1, y1 = np.ceil(uv.max(0)).astype(int)
-    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, width), min(y1, height)
-    return None if x1 <= x0 or y1 <= y0 else (y0, y1, x0, x1)
