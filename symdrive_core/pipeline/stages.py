@@ -212,7 +212,6 @@ def inpaint_stage(ctx) -> StageResult:
     from tqdm import tqdm
 
     from ..insertion.exposed import edited_here, inpaint_region
-    from ..insertion.harmonizer import restorer_harmonizer
     from ..io.images import read_image, write_image, write_mask
     from .outputs import ASSET_CACHE
     from .scene_render import SceneRenderer
@@ -220,7 +219,7 @@ def inpaint_stage(ctx) -> StageResult:
     cfg = ctx.options.inpaint
     renderer = SceneRenderer(ctx.manifest, device=ctx.device, asset_cache=ctx.tree.folder(ASSET_CACHE),
                              background_gaussians=background(ctx), actor_gaussians=recorded_vehicles(ctx))
-    inpaint = restorer_harmonizer(restorer(ctx), cfg.harmonize, max_memory_gib=ctx.options.sampler.max_memory_gib)
+    inpaint = _harmonizer(ctx, cfg.harmonize)
     jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("inpaint").frames]
     pixels, n = 0, 0
     for cam, fi in tqdm(jobs, desc="inpaint", unit="frame", disable=not ctx.progress):
@@ -370,11 +369,12 @@ def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
     return region
 
 
-def _harmonizer(ctx):
+def _harmonizer(ctx, config=None):
+    """The RePaint sampler on the run's restorer: ``config`` (default: the harmonization's)."""
     from ..insertion.harmonizer import restorer_harmonizer
 
     o = ctx.options
-    return restorer_harmonizer(restorer(ctx), o.harmonize, max_memory_gib=o.sampler.max_memory_gib)
+    return restorer_harmonizer(restorer(ctx), config or o.harmonize, max_memory_gib=o.sampler.max_memory_gib)
 
 
 @stage("harmonize")
