@@ -91,6 +91,17 @@ def count_int(value: str) -> int:
     return _int_at_least(value, 0)
 
 
+def unit_fraction(value: str) -> float:
+    """A share from 0 to 1 (a restorer's strength)."""
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number from 0 to 1, got {value!r}") from None
+    if not 0.0 <= x <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be from 0 to 1, got {value}")
+    return x
+
+
 def _int_at_least(value: str, low: int) -> int:
     try:
         n = int(value)

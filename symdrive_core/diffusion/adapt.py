@@ -41,6 +41,14 @@ class AdaptConfig:
     degraded_fraction: float = 0.75  # as the shipped guided restorer was trained
     seed: int = 0
     threads: int = 1
+    # every this many training frames one is left out of training, to fit the restorer's strength
+    # on (:mod:`.strength`); fewer than two such groups of frames: no fit, the full strength
+    validation_every: int = 8
+
+
+def validation_frames(frames: list[int], every: int) -> list[int]:
+    """The frames the strength is fitted on: one in ``every``, from the middle of each group."""
+    return list(frames[every // 2 :: every]) if every > 0 and len(frames) >= 2 * every else []
 
 
 def shipped_weights(guided: bool) -> Path:
@@ -68,13 +76,20 @@ def drive_identity(manifest, reconstruction: str | Path) -> dict:
     return {"scene": manifest.name, "identity": h.hexdigest()[:16]}
 
 
+def weights_meta(weights: str | Path) -> dict:
+    """What a weights file records beside its network (``meta``: data, drive, steps, strength)."""
+    from safetensors import safe_open
+
+    with safe_open(str(weights), "np") as f:
+        return json.loads((f.metadata() or {}).get("meta", "{}"))
+
+
 def trained_drive(weights: str | Path) -> dict | None:
     """The drive ``weights`` were trained on, from their metadata (None: not recorded)."""
-    from safetensors import SafetensorError, safe_open
+    from safetensors import SafetensorError
 
     try:
-        with safe_open(str(weights), "np") as f:
-            meta = json.loads((f.metadata() or {}).get("meta", "{}"))
+        meta = weights_meta(weights)
     except (OSError, SafetensorError, json.JSONDecodeError):
         return None
     drive = meta.get("data", {}).get("drive") if isinstance(meta, dict) else None
@@ -82,21 +97,28 @@ def trained_drive(weights: str | Path) -> dict | None:
 
 
 def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: AdaptConfig = AdaptConfig(), *,
-                   guided: bool = True, progress: bool = True) -> dict:
+                   guided: bool = True, sampler=None, progress: bool = True) -> dict:
     """Fine-tune the shipped restorer (``guided``: the guided one, on pairs with warps) on this
-    drive's pairs, into ``out`` (pairs, weights, record, checkpoint). Weights already finished there
-    are reused, a checkpoint is resumed. Returns the training record plus ``reused``."""
+    drive's pairs, into ``out`` (pairs, weights, record, checkpoint), and fit its strength on the
+    held-out frames' pairs sampled by ``sampler`` (default: the built-in one). Weights already
+    finished there are reused, a checkpoint is resumed. Returns the training record (with
+    ``strength``) plus ``reused``."""
     import time
 
+    from ..io.atomic import write_text_atomic
     from ..scene.ground_truth import truth_camera
-    from .config import CycleConfig
+    from .config import SAMPLERS, CycleConfig
     from .cycle import cycle_config
     from .data import make_pairs
     from .train import RECORD, WEIGHTS, TrainConfig, train_restorer
 
+    sampler = SAMPLERS["builtin"] if sampler is None else sampler
+
     out = Path(out)
     if (out / WEIGHTS).exists() and (out / RECORD).exists():
-        return {**json.loads((out / RECORD).read_text()), "reused": True}
+        record = json.loads((out / RECORD).read_text())
+        if "strength" in record:
+            return {**record, "reused": True}
     t0 = time.perf_counter()
     if not (out / PAIRS).exists():
         make_pairs(manifest, gaussians, config.offsets, out / PAIRS, camera=truth_camera(manifest).name,
@@ -104,9 +126,39 @@ def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: Ad
                    cycle_config=cycle_config(CycleConfig(iters=config.cycle_iters)),
                    warps=guided, drive=drive, progress=progress)
     left = None if config.max_seconds is None else max(config.max_seconds - (time.perf_counter() - t0), 0.0)
+    held = validation_frames(pair_frames(out / PAIRS), config.validation_every)
     cfg = TrainConfig(steps=config.iters, lr=config.lr, warmup=config.warmup, seed=config.seed,
                       threads=config.threads, degraded_fraction=config.degraded_fraction,
-                      init=str(shipped_weights(guided)), guide=guided, max_seconds=left)
+                      init=str(shipped_weights(guided)), guide=guided, max_seconds=left,
+                      holdout_frames=tuple(held))
     record = train_restorer(out / PAIRS, out, cfg, resume=True, progress=progress)
     pairs_seconds = round(time.perf_counter() - t0 - record["seconds"], 1)
+    record["strength"] = _fit_strength(out, held, sampler, guided)
+    write_text_atomic(out / RECORD, json.dumps(record, indent=1) + "\n")
     return {**record, "pairs_seconds": pairs_seconds, "reused": False}
+
+
+def pair_frames(pairs: Path) -> list[int]:
+    """The recorded frames a pairs file was made from (its metadata)."""
+    from safetensors import safe_open
+
+    with safe_open(str(pairs), "np") as f:
+        return [int(i) for i in json.loads((f.metadata() or {}).get("frames", "[]"))]
+
+
+def _fit_strength(out: Path, held: list[int], sampler, guided: bool) -> dict:
+    """Fit the trained weights' strength on the ``held`` frames' pairs and write it into the
+    weights (their sampler keeps that share of the correction); ``{"strength": 1}`` without them."""
+    from .data import PairSet
+    from .models import load_builtin, save_builtin
+    from .strength import fit_strength
+    from .train import WEIGHTS
+
+    fit = None
+    if held:
+        restorer = load_builtin(out / WEIGHTS)
+        fit = fit_strength(restorer, PairSet(out / PAIRS, held, held_out=True), sampler, guided=guided)
+    if fit is None:
+        return {"strength": 1.0, "frames": held, "fit": None}
+    save_builtin(out / WEIGHTS, restorer.net, {**weights_meta(out / WEIGHTS), "strength": fit.strength}, half=True)
+    return {"strength": fit.strength, "frames": held, "fit": fit.to_json()}

@@ -56,6 +56,10 @@ class SamplerConfig:
     # sampler that starts from pure noise (``n_start`` 0) has no initialisation to start from and
     # draws its noise whatever this says.
     noise_free: bool = False
+    # Share of the restorer's correction kept: the view is ``start + strength * (restored - start)``
+    # (see :mod:`.strength`). None: the restorer's own, which an adaptation fits on the drive's
+    # held-out recorded frames (1 for weights that record none: the full correction).
+    strength: float | None = None
     # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
     # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
     max_memory_gib: float | None = None
@@ -91,6 +95,7 @@ class TrainConfig:
     start_t_min: float = 0.1  # their lowest noise level (see flow.flow_loss)
     init: str | None = None  # restorer weights to start from (default: a fresh network)
     guide: bool = False  # the warp and its mask as a condition (pairs with warps)
+    holdout_frames: tuple[int, ...] = ()  # recorded frames whose pairs training leaves out
     # stop after this many seconds of training even if fewer than ``steps`` ran (None: no limit);
     # the learning-rate schedule still spans ``steps``, and the EMA so far is what ships
     max_seconds: float | None = None

@@ -162,9 +162,11 @@ def file_sha256(path: str | os.PathLike) -> str:
 
 
 class PairSet:
-    """The pairs of one file as float tensors [N, 3, H, W] in [0, 1]."""
+    """The pairs of one file as float tensors [N, 3, H, W] in [0, 1]; with ``holdout`` (recorded
+    frames), only the pairs of the other frames, or with ``held_out`` only theirs (degraded starts
+    and warps of every frame stay: they are indexed per pair)."""
 
-    def __init__(self, path: str | os.PathLike):
+    def __init__(self, path: str | os.PathLike, holdout=(), *, held_out: bool = False):
         from safetensors.numpy import load_file
 
         path = Path(path)
@@ -203,6 +205,13 @@ class PairSet:
             self.warp_mask = torch.from_numpy(data["warp_mask"]).float()[:, None]
             where = {int(f): k for k, f in enumerate(data["warp_frame"].tolist())}
             self.warp_of = [where[int(f)] for f in frame.tolist()]
+        holdout = {int(f) for f in holdout}
+        if holdout or held_out:
+            keep = [i for i, f in enumerate(frame.tolist()) if (int(f) in holdout) == held_out]
+            self.left, self.target, self.right, self.offset = (
+                x[keep] for x in (self.left, self.target, self.right, self.offset))
+            self.starts = [self.starts[i] for i in keep]
+            self.warp_of = None if self.warp_of is None else [self.warp_of[i] for i in keep]
 
     def __len__(self) -> int:
         return len(self.target)

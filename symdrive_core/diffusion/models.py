@@ -27,11 +27,13 @@ from .unet import UNet, UNetConfig
 
 class BuiltinRestorer:
     """The shipped UNet in pixel space (no time shift). ``guided``: the restorer the
-    geometry-guided methods sample with instead of this one (None: this one)."""
+    geometry-guided methods sample with instead of this one (None: this one); ``strength``: the
+    share of its correction a sampler keeps unless told otherwise (:mod:`.strength`)."""
 
-    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None):
+    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None, strength: float = 1.0):
         self.net = net
         self.guided = guided
+        self.strength = strength
         self.latent = PixelSpace()
 
     def time_shift(self, latent_shape) -> float:
@@ -99,7 +101,18 @@ def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
         net.load_state_dict(state)
     except RuntimeError as exc:
         raise InputError(path, f"weights do not match their config: {exc}") from exc
-    return BuiltinRestorer(net.eval())
+    return BuiltinRestorer(net.eval(), strength=_strength(path, meta.get("meta")))
+
+
+def _strength(path: Path, meta: str | None) -> float:
+    """The strength the weights record (``meta.strength``, fitted by an adaptation), else 1."""
+    try:
+        value = json.loads(meta or "{}").get("strength", 1.0)
+    except (json.JSONDecodeError, AttributeError):
+        return 1.0
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+        raise InputError(path, f"strength {value!r} is not a number in [0, 1]", "meta.strength")
+    return float(value)
 
 
 def load_restorer(backend: str = "builtin", weights: str | os.PathLike | None = None, **flux_files):

@@ -60,6 +60,8 @@ def restore_image(
 ) -> torch.Tensor:
     """The centre view between ``left`` and ``right``; ``init`` seeds the start at ``n_start``;
     ``guide`` [B, 4, H, W] (warp and mask at the target camera) reaches restorers that take one.
+    The result moves from ``init`` by the sampler's (or the restorer's) ``strength`` share of the
+    restorer's correction (:mod:`.strength`).
 
     From grey inputs the result is grey, their channel mean: nothing in them says what colour the
     view has, yet a restorer trained on colour streets paints a cast of about 1/255 and colour
@@ -89,4 +91,16 @@ def restore_image(
                    z, ts, start=config.n_start)
     out = lat.decode(z)
     out = out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
+    if init is not None:
+        out = toward(init, out, restoring_strength(restorer, config))
     return greyed(out) if is_grey(left, right, init) else out
+
+
+def restoring_strength(restorer, config: SamplerConfig = DEFAULT) -> float:
+    """The sampler's ``strength``, else the restorer's (fitted by adaptation), else 1."""
+    return float(config.strength if config.strength is not None else getattr(restorer, "strength", 1.0))
+
+
+def toward(start: torch.Tensor, restored: torch.Tensor, strength: float) -> torch.Tensor:
+    """``start + strength * (restored - start)`` in [0, 1]; ``restored`` itself at strength 1."""
+    return restored if strength == 1.0 else (start + strength * (restored - start)).clamp(0.0, 1.0)

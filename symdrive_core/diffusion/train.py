@@ -123,7 +123,9 @@ def train_restorer(
     cfg = cfg or TrainConfig()
     out = Path(out)
     torch.set_num_threads(cfg.threads)
-    data = PairSet(pairs)
+    data = PairSet(pairs, cfg.holdout_frames)
+    if not len(data):
+        raise InputError(pairs, "no pairs left to train on once the held-out frames are left out")
     if cfg.guide and not data.has_warps:
         raise InputError(pairs, "training with the guide needs pairs with warps (`symdrive make-pairs --warps`)")
     torch.manual_seed(cfg.seed)

@@ -162,7 +162,8 @@ def warper(ctx, cam):
 def adapted_folder(ctx) -> Path:
     """Where this drive's adapted restorer lives: under a key of the drive, the adaptation's
     options and the code (shipped weights included), not under the run's key, so runs that only
-    restore differently reuse it."""
+    restore differently reuse it (unless they sample differently: the strength is fitted with the
+    run's sampler)."""
     import hashlib
     import json
     from dataclasses import asdict
@@ -172,8 +173,11 @@ def adapted_folder(ctx) -> Path:
 
     if ctx.shared.adapted is None:
         o = ctx.options
+        s = o.sampler
+        deterministic = s.noise_free and s.n_start > 0  # then seed and samples play no part
+        sampling = [s.steps, s.n_start, s.noise_free] + ([] if deterministic else [s.seed, s.samples])
         payload = {"drive": drive(ctx), "adapt": asdict(o.adapt), "guided": o.geometry_guided,
-                   "code": code_version()}
+                   "sampler": sampling, "code": code_version()}
         key = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
         ctx.shared.adapted = ctx.tree.folder(ADAPT_CACHE, key)
     return ctx.shared.adapted
@@ -251,12 +255,13 @@ def adapt_stage(ctx) -> StageResult:
     guided = warper(ctx, truth_camera(m)) is not None
     folder = adapted_folder(ctx)
     record = adapt_restorer(m, background(ctx), drive(ctx), folder, opts.adapt, guided=guided,
-                            progress=ctx.progress)
+                            sampler=opts.sampler, progress=ctx.progress)
     ctx.shared.restorer = None  # restorer() loads the adapted weights
     made = {} if record["reused"] else {"pairs_seconds": record["pairs_seconds"],
                                         "train_seconds": record["seconds"]}
     return StageResult({"reused": record["reused"], "guided": guided, "pairs": record["data"]["pairs"],
                         "steps": record["steps"], "final_loss": record["final_loss"],
+                        "strength": record["strength"],
                         "weights": folder.relative_to(ctx.tree.root).as_posix(), **made})
 
 

@@ -3,6 +3,7 @@ budget, and grey inputs that restore grey."""
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -135,3 +136,25 @@ def test_a_grey_camera_restores_grey_views_from_renders_with_colour():
     assert _spread(grey_but) > 2 / 255
     for offset in (0.5, -1.0):
         assert _spread(chain.restore(offset, 0.5)) <= 0.5 / 255
+
+
+def test_adaptation_fits_its_strength_on_frames_it_did_not_train_on(drive, tmp_path):
+    manifest, g, ply = drive
+    out = tmp_path / "adapt"
+    config = replace(TINY, validation_every=2)  # training frames 0, 2, 3, 5: 2 and 5 held out
+    record = adapt_restorer(manifest, g, drive_identity(manifest, ply), out, config, guided=True, progress=False)
+    strength = record["strength"]
+    assert strength["frames"] == [2, 5] and list(record["config"]["holdout_frames"]) == [2, 5]
+    assert strength["fit"]["samples"] == 2  # one pair (d = 0.5) and one cycle start per held-out frame
+    assert 0.0 <= strength["strength"] <= 1.0
+    assert load_builtin(out / WEIGHTS).strength == pytest.approx(strength["strength"])
+    assert trained_drive(out / WEIGHTS) == drive_identity(manifest, ply)  # the rest of the record stays
+    assert json.loads((out / "restorer.json").read_text())["strength"] == strength
+
+
+def test_too_few_frames_to_hold_out_keep_the_full_strength(drive, tmp_path):
+    manifest, g, ply = drive
+    out = tmp_path / "adapt"
+    record = adapt_restorer(manifest, g, drive_identity(manifest, ply), out, TINY, guided=True, progress=False)
+    assert record["strength"] == {"strength": 1.0, "frames": [], "fit": None}
+    assert list(record["config"]["holdout_frames"]) == [] and load_builtin(out / WEIGHTS).strength == 1.0

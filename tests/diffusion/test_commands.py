@@ -108,6 +108,16 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
     assert metrics["refine"]["frames"] == [0, 3] and metrics["refine"]["restored_views"] == 2 * 2
     assert metrics["refine"]["step_m"] == 0.0  # single-view restorations serve refinement as well
 
+    # at strength 0 every view is its start: the warp for the guided chain, the render for the other
+    out = tmp_path / "eval-start"
+    assert main(["restore", str(root), *common, "--out", str(out), "--evaluate", "--frames", "0", "--offsets", "0.5",
+                 "--methods", "warp,geo_single_view,ar_d1.0", "--strength", "0"]) == 0
+    psnr = {r["method"]: r["psnr"] for r in json.loads((out / "metrics.json").read_text())["lateral"]}
+    assert psnr["geo_single_view"] == psnr["warp"] and psnr["ar_d1.0"] == psnr["raw_3dgs"]
+    with pytest.raises(SystemExit) as exc:
+        main(["restore", str(root), *common, "--out", str(out), "--strength", "1.5"])
+    assert exc.value.code == 2
+
     out = tmp_path / "views"
     assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4",
                  "--geometry-guided"]) == 0

@@ -1,0 +1,76 @@
+"""How much of the restorer's correction a drive can trust, fitted on the drive's own frames.
+
+The restorer moves its start (the warp, or the render) toward what the streets it learnt from
+look like. Off those streets part of that move is wrong: on a Cycles street it never saw, the
+adapted guided restorer took up to 0.6 dB from the warp it started from within 1.5 m, while on a
+real drive its full correction is what helps (docs/results.md). The view a sampler returns is
+therefore ``start + s * (restored - start)``, and an adaptation fits ``s`` on recorded frames it
+held out of training: over all their pixels the least-squares ``s`` has the closed form
+``<r - x, y - x> / |r - x|^2`` (``x`` the start, ``r`` the restored view, ``y`` the recorded
+image), clipped to [0, 1] (never past the restorer's own step, never against it). The held-out
+samples are built as training builds its degraded ones: the frame's warp filled by a cycle
+reconstruction's render as the start, the renders at ``+-d`` as the two conditions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import torch
+
+from .config import SamplerConfig
+from .data import PairSet
+from .sampler import restore_image
+
+
+@dataclass(frozen=True)
+class StrengthFit:
+    strength: float  # the fitted share, clipped to [0, 1]
+    samples: int  # held-out (pair, degraded start) samples it was fitted on
+    start_psnr: float  # the starts against the recorded images (dB, over all samples' pixels)
+    restored_psnr: float  # the full correction
+    fitted_psnr: float  # the fitted share
+
+    def to_json(self) -> dict:
+        return {k: round(v, 4) if isinstance(v, float) else v for k, v in vars(self).items()}
+
+
+def held_out_samples(pairs: PairSet, guided: bool):
+    """``(left, right, start, guide, target)`` [1, C, H, W] per held-out pair and degraded start."""
+    for i in range(len(pairs)):
+        for s in pairs.starts[i]:
+            start, guide = pairs.degraded[s], None
+            if guided:
+                j = pairs.warp_of[i]
+                mask = pairs.warp_mask[j]
+                start = torch.where(mask > 0, pairs.warp[j], start)
+                guide = torch.cat([start, mask])[None]
+            yield pairs.left[i : i + 1], pairs.right[i : i + 1], start[None], guide, pairs.target[i : i + 1]
+
+
+def fit_strength(restorer, pairs: PairSet, sampler: SamplerConfig, *, guided: bool) -> StrengthFit | None:
+    """The least-squares strength of ``restorer`` on ``pairs`` (held-out frames, with degraded
+    starts; ``guided``: with warps) sampled by ``sampler``; None where there is nothing to fit on."""
+    full = replace(sampler, strength=1.0)
+    dot = norm = start_se = restored_se = 0.0
+    pixels = samples = 0
+    for left, right, start, guide, target in held_out_samples(pairs, guided):
+        restored = restore_image(restorer, left, right, start, full, guide).double()
+        step, error = restored - start.double(), target.double() - start.double()
+        dot += float((step * error).sum())
+        norm += float((step * step).sum())
+        start_se += float((error * error).sum())
+        restored_se += float(((restored - target.double()) ** 2).sum())
+        pixels, samples = pixels + target.numel(), samples + 1
+    if not samples or norm == 0.0:
+        return None
+    s = min(max(dot / norm, 0.0), 1.0)
+    # |x + s (r - x) - y|^2 = |e|^2 - 2 s <step, e> + s^2 |step|^2, exactly: for s in [0, 1] the
+    # view lies between two images in [0, 1], so the sampler's clamp changes nothing
+    fitted_se = start_se - 2.0 * s * dot + s * s * norm
+
+    def psnr(se: float) -> float:
+        return 10.0 * math.log10(pixels / max(se, 1e-12))
+
+    return StrengthFit(s, samples, psnr(start_se), psnr(restored_se), psnr(fitted_se))
