@@ -21,7 +21,8 @@ def add_commands(sub) -> None:
     p.add_argument("--sh-degree", type=count_int,
                    help=f"SH degree of the result (default {default_of(ReconstructConfig, 'sh_degree')})")
     p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
-                   f"0 = off (default {default_of(ReconstructConfig, 'depth_weight')})")
+                   f"0 = off (default {default_of(ReconstructConfig, 'sensor_depth_weight')} where the depth is LiDAR's, "
+                   "sparse, as `import lidar` writes it; else 0)")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
     p.add_argument("--max-init-points", type=positive_int, help="point-cloud subset to start from "

@@ -30,7 +30,11 @@ class ReconstructConfig:
     lr_scales: float = 5e-3
     lr_quats: float = 1e-3
     ssim_lambda: float = 0.2
-    depth_weight: float = 0.0  # inverse-depth L1 at the depth maps' measured pixels (0 = off)
+    # Inverse-depth L1 at the depth maps' measured pixels, this weight (0 = off); None: the
+    # ``sensor_depth_weight`` where the camera's depth is a sensor's sparse measurement
+    # (``depth_zero: "unmeasured"``, as ``import lidar`` writes it), off for other depth maps.
+    depth_weight: float | None = None
+    sensor_depth_weight: float = 1.0  # the largest measured weight that kept held-out PSNR (docs/results.md)
     init_opacity: float = 0.3
     sky_points: int = 4000
     max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
@@ -45,6 +49,12 @@ class ReconstructConfig:
     decompose: bool = True
     actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
     actor_max_gaussians: int = 40_000
+
+    def depth_weight_for(self, camera) -> float:
+        """The depth loss's weight for training on ``camera`` (a scene camera)."""
+        if self.depth_weight is not None:
+            return self.depth_weight
+        return self.sensor_depth_weight if camera.depth_zero == "unmeasured" else 0.0
 
 
 @dataclass

@@ -299,6 +299,7 @@ def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, star
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
+    depth_weight = cfg.depth_weight or 0.0  # unresolved (None): views without a camera's rule
     log = {"resumed_from": start, "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, cfg.iters), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
@@ -311,12 +312,12 @@ def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, star
                 if group["name"] == "means":
                     group["lr"] = position_lr(cfg, part.extent, it)
         degree = min(cfg.sh_degree, it // cfg.sh_every)
-        rgb, alpha, info, present = render_parts(parts, view, degree, cfg.depth_weight > 0)
+        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
-        if cfg.depth_weight > 0:
+        if depth_weight > 0:
             dl = depth_loss(info, alpha, view.depth)
             if dl is not None:
-                loss = loss + cfg.depth_weight * dl
+                loss = loss + depth_weight * dl
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
         means2d = info["means2d"]
@@ -416,6 +417,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     (the fit: iterations, timings, frames). Scoring the result is the caller's
     (``eval.views.evaluate_heldout`` on the held-out frames)."""
     cfg = cfg or ReconstructConfig()
+    cfg = replace(cfg, depth_weight=cfg.depth_weight_for(manifest.cameras[0]))  # the camera load_views trains on
     out = Path(out)
     train_frames, heldout = split_frames(manifest, cfg.holdout_every)
     views = load_views(manifest, train_frames, depth=True)
@@ -439,7 +441,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     metrics = {"iterations": cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
-               "extent_m": round(extent, 3), "densify": log["densify"],
+               "extent_m": round(extent, 3), "depth_weight": cfg.depth_weight, "densify": log["densify"],
                **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga)} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")

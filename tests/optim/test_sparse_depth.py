@@ -86,3 +86,18 @@ def test_sparse_depth_supervision_improves_heldout_depth(sparse_package, tmp_pat
         errors[weight], psnr[weight] = np.mean(err), evaluate_heldout(m, result.gaussians)["psnr_heldout"]
     assert errors[0.5] < 0.85 * errors[0.0], errors
     assert psnr[0.5] > psnr[0.0] - 1.5, psnr
+
+
+def test_lidar_depth_turns_the_depth_loss_on_by_default(sparse_package, synthetic_package, tmp_path):
+    """By default the loss runs on a sensor's sparse depth (``depth_zero: unmeasured``) and not on
+    other depth maps; a weight given explicitly wins either way."""
+    tiny = dict(iters=2, densify_from=40, checkpoint_every=60, sky_points=0, sh_degree=0)
+    lidar = ReconstructConfig().sensor_depth_weight
+    assert lidar > 0
+    cases = [(sparse_package, None, lidar), (synthetic_package[0], None, 0.0), (sparse_package, 0.0, 0.0),
+             (synthetic_package[0], 0.2, 0.2)]
+    for k, (root, given, expected) in enumerate(cases):
+        cfg = ReconstructConfig(**tiny, depth_weight=given)
+        assert cfg.depth_weight_for(load_manifest(root).cameras[0]) == expected
+        result = reconstruct(load_manifest(root), tmp_path / str(k), cfg, progress=False)
+        assert result.metrics["depth_weight"] == expected
