@@ -103,4 +103,7 @@ def restoring_strength(restorer, config: SamplerConfig = DEFAULT) -> float:
 
 def toward(start: torch.Tensor, restored: torch.Tensor, strength: float) -> torch.Tensor:
     """``start + strength * (restored - start)`` in [0, 1]; ``restored`` itself at strength 1."""
-    return restored if strength == 1.0 else (start + strength * (restored - start)).clamp(0.0, 1.0)
+    if strength == 1.0:
+        return restored
+    start = start.to(restored.device, restored.dtype)  # a latent restorer decodes on its own device
+    return (start + strength * (restored - start)).clamp(0.0, 1.0)

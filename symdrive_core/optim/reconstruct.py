@@ -299,7 +299,7 @@ def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, star
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
-    depth_weight = cfg.depth_weight or 0.0  # unresolved (None): views without a camera's rule
+    depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
     log = {"resumed_from": start, "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, cfg.iters), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
