@@ -2,7 +2,7 @@
 
 The restorer moves its start (the warp, or the render) toward what the streets it learnt from
 look like. Off those streets part of that move is wrong: on a Cycles street it never saw, the
-adapted guided restorer took up to 0.6 dB from the warp it started from within 1.5 m, while on a
+adapted guided restorer took up to 0.7 dB from the warp it started from within 2 m, while on a
 real drive its full correction is what helps (docs/results.md). The view a sampler returns is
 therefore ``start + s * (restored - start)``, and an adaptation fits ``s`` on recorded frames it
 held out of training: over all their pixels the least-squares ``s`` has the closed form
