@@ -193,7 +193,8 @@ def reconstruct_stage(ctx) -> StageResult:
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
     ctx.shared.background_path = out / "background.ply"
     ctx.shared.actors = result.actors
-    return StageResult({"gaussians": len(result.gaussians), "actors": {k: len(g) for k, g in result.actors.items()}})
+    return StageResult({"gaussians": len(result.gaussians), "actors": {k: len(g) for k, g in result.actors.items()},
+                        "depth_weight": result.metrics["depth_weight"]})
 
 
 @stage("render")

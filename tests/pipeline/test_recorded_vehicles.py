@@ -79,6 +79,7 @@ def test_the_default_run_fits_and_renders_the_recorded_car(tmp_path):
     assert main(["run", str(root), "--out", str(out), "--quiet"]) == 0
     stages = _stages(out)
     assert stages["reconstruct"]["ran"] and stages["reconstruct"]["actors"]["car_1"] > 100
+    assert stages["reconstruct"]["depth_weight"] == 0.0  # no sensor depth: the depth loss stays off
     assert (out / "reconstruction/actors/car_1.ply").exists()
     mask = read_mask(out / "masks/front/car_1/000008.png")
     assert (mask > 0.5).sum() > 100
