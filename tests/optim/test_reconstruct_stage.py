@@ -24,7 +24,7 @@ def test_reconstruct_stage_hands_its_result_on_without_editing_the_manifest(synt
     def fake_reconstruct(manifest, out, *args, **kwargs):  # the stage's plumbing, not the optimiser
         assert manifest.background_splats is None
         write_splats(out / "background.ply", fitted)
-        return ReconstructResult(fitted, {"iterations": 1}, out)
+        return ReconstructResult(fitted, {"iterations": 1, "depth_weight": 0.0}, out)
 
     monkeypatch.setattr(reconstruct_module, "reconstruct", fake_reconstruct)
     out = tmp_path / "out"
