@@ -224,6 +224,14 @@ class PairSet:
     def has_warps(self) -> bool:
         return self.warp is not None
 
+    def filled_warp(self, i: int, start: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pair ``i``'s warp [3, H, W] filled by degraded start ``start`` where no frame saw the
+        ground (as sampling fills it with the render), and the guide [4, H, W]: that and the mask."""
+        j = self.warp_of[i]
+        mask = self.warp_mask[j]
+        filled = torch.where(mask > 0, self.warp[j], self.degraded[start])
+        return filled, torch.cat([filled, mask])
+
     def batch(self, size: int, crop: int, generator: torch.Generator, degraded_fraction: float = 0.0):
         """(left, target, right, start, guide) random crops of ``crop`` px with random mirroring;
         ``start`` is one of the frame's degraded starts for a ``degraded_fraction`` share of the
@@ -247,14 +255,12 @@ class PairSet:
             views = [v[i] for v in (self.left, self.target, self.right)]
             if use[k] or self.has_warps:
                 choices = self.starts[i]
-                degraded = self.degraded[choices[int(pick[k] * len(choices))]]
+                start = choices[int(pick[k] * len(choices))]
             if self.has_warps:
-                j = self.warp_of[i]
-                mask = self.warp_mask[j]
-                filled = torch.where(mask > 0, self.warp[j], degraded)
-                views += [filled if use[k] else views[1], torch.cat([filled, mask])]
+                filled, guide = self.filled_warp(i, start)
+                views += [filled if use[k] else views[1], guide]
             else:
-                views.append(degraded if use[k] else views[1])
+                views.append(self.degraded[start] if use[k] else views[1])
             views = [v[:, y : y + ch, x : x + cw] for v in views]
             if flips[k]:
                 views = [views[2], views[1], views[0], *views[3:]]

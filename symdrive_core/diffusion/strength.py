@@ -17,8 +17,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-import torch
-
 from .config import SamplerConfig
 from .data import PairSet
 from .sampler import restore_image
@@ -40,13 +38,9 @@ def held_out_samples(pairs: PairSet, guided: bool):
     """``(left, right, start, guide, target)`` [1, C, H, W] per held-out pair and degraded start."""
     for i in range(len(pairs)):
         for s in pairs.starts[i]:
-            start, guide = pairs.degraded[s], None
-            if guided:
-                j = pairs.warp_of[i]
-                mask = pairs.warp_mask[j]
-                start = torch.where(mask > 0, pairs.warp[j], start)
-                guide = torch.cat([start, mask])[None]
-            yield pairs.left[i : i + 1], pairs.right[i : i + 1], start[None], guide, pairs.target[i : i + 1]
+            start, guide = pairs.filled_warp(i, s) if guided else (pairs.degraded[s], None)
+            yield (pairs.left[i : i + 1], pairs.right[i : i + 1], start[None], None if guide is None else guide[None],
+                   pairs.target[i : i + 1])
 
 
 def fit_strength(restorer, pairs: PairSet, sampler: SamplerConfig, *, guided: bool) -> StrengthFit | None:
