@@ -18,7 +18,12 @@ where a frame has no depth; most of them with sparse LiDAR depth); sky is never 
 ground model is one plane per window of frames along the camera path, each fitted by
 :func:`~..importers.ground.fit_ground` to the package's points (``background.points``) or the
 splat centres; a ray takes the plane of the window whose anchor camera is nearest to where it
-meets the ground.
+meets the ground. Structure from motion finds few road points on a real street (grey asphalt,
+the car's own hood at the bottom of the image), so a window whose points give no plane takes, in
+this order, one fitted to the reconstruction's splat centres (which cover the road it renders), a
+neighbouring window's, the package's own ground (an imported package's world has the ground its
+import fitted at ``z = 0``), or the nearest fitted window's; :meth:`GroundModel.summary` says which
+window took which, for the reports.
 """
 
 from __future__ import annotations
@@ -44,6 +49,9 @@ class WarpConfig:
     max_range_m: float = 40.0  # ground pixels: z-depth at most this
     ground_window: int = 8  # each plane is fitted to the points near cameras anchor +- this many frames
     ground_stride: int = 4  # a plane anchored every this many frames
+    # A window without a plane of its own borrows one from a window at most this many anchors away
+    # before the package's ground plane (whose single plane ignores a slope's changes).
+    neighbour_windows: int = 2
     # A source pixel shows the ground where its depth is within this fraction of the ground
     # model's (0.03: about 5 cm of height at a 1.6 m camera; a kerb or a car fails).
     depth_tolerance: float = 0.03
@@ -57,6 +65,11 @@ class WarpConfig:
 DEFAULT = WarpConfig()
 
 
+# What a window's plane was fitted to, in the order they are tried (see the module docstring).
+PLANE_SOURCES = ("points", "splats", "neighbour", "package", "nearest")
+WORLD_GROUND = (np.array([0.0, 0.0, 1.0]), 0.0)  # an imported package's ground: z = 0, +Z up
+
+
 @dataclass
 class GroundModel:
     """Planes ``normal . x + offset = 0`` (normals up), each anchored at a camera centre."""
@@ -64,26 +77,54 @@ class GroundModel:
     anchors: np.ndarray  # [K, 3] anchor camera centres
     normals: np.ndarray  # [K, 3]
     offsets: np.ndarray  # [K]
+    # Per plane: its cameras (first, last), what it was fitted to (PLANE_SOURCES) and, for a
+    # borrowed plane, why the window's own points gave none.
+    windows: list[tuple[int, int]] = field(default_factory=list)
+    sources: list[str] = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
 
     @classmethod
-    def fit(cls, points, c2ws, config: WarpConfig = DEFAULT) -> GroundModel:
-        """A plane per window of ``2 * ground_window + 1`` cameras, one every ``ground_stride``."""
+    def fit(cls, points, c2ws, config: WarpConfig = DEFAULT, *, splats=None, package_ground=None) -> GroundModel:
+        """A plane per window of ``2 * ground_window + 1`` cameras, one every ``ground_stride``.
+        A window whose ``points`` give no plane tries ``splats`` (the reconstruction's centres),
+        then a neighbouring window's plane, ``package_ground`` ((normal, offset) or None), then the
+        nearest window's; a :class:`WarpError` only when nothing gives any plane."""
         c2ws = np.asarray(c2ws, dtype=np.float64)
         n = len(c2ws)
         anchors = list(range(0, n, max(1, config.ground_stride)))
         if anchors[-1] != n - 1:
             anchors.append(n - 1)
-        normals, offsets = [], []
-        for a in anchors:
-            lo, hi = max(0, a - config.ground_window), min(n, a + config.ground_window + 1)
-            try:
-                g = fit_ground(points, c2ws[lo:hi])
-            except AlignmentError as e:
-                reason = str(e).split(";")[0]
-                raise WarpError(f"the geometry-guided warp found no ground under cameras {lo} to {hi - 1}: {reason}") from e
-            normals.append(g.normal)
-            offsets.append(g.offset)
-        return cls(c2ws[anchors, :3, 3], np.array(normals), np.array(offsets))
+        windows = [(max(0, a - config.ground_window), min(n, a + config.ground_window + 1) - 1) for a in anchors]
+        planes, sources, reasons = [], [], []
+        for lo, hi in windows:
+            plane, source, reason = _window_plane(c2ws[lo:hi + 1], (("points", points), ("splats", splats)))
+            planes.append(plane)
+            sources.append(source)
+            reasons.append(reason)
+        fitted = [k for k, p in enumerate(planes) if p is not None]
+        if not fitted and package_ground is None:
+            raise WarpError(f"the geometry-guided warp found no ground under cameras {windows[0][0]} to "
+                            f"{windows[-1][1]}: {reasons[0]}")
+        for k in range(len(planes)):
+            if planes[k] is not None:
+                continue
+            near = min(fitted, key=lambda j: (abs(j - k), j), default=None)
+            if near is not None and abs(near - k) <= config.neighbour_windows:
+                planes[k], sources[k] = planes[near], "neighbour"
+            elif package_ground is not None:
+                planes[k], sources[k] = (np.asarray(package_ground[0], np.float64), float(package_ground[1])), "package"
+            else:
+                planes[k], sources[k] = planes[near], "nearest"
+        return cls(c2ws[anchors, :3, 3], np.array([p[0] for p in planes]), np.array([p[1] for p in planes]),
+                   windows, sources, reasons)
+
+    def summary(self) -> dict:
+        """How many planes each source gave and, for every plane not fitted to the window's own
+        points, its cameras, source and why the points gave none (the reports' ``ground``)."""
+        counts = {s: self.sources.count(s) for s in PLANE_SOURCES if s in self.sources}
+        borrowed = [{"cameras": list(w), "plane": s, "why": r}
+                    for w, s, r in zip(self.windows, self.sources, self.reasons) if s != "points"]
+        return {"planes": counts, **({"other_than_points": borrowed} if borrowed else {})}
 
     def intersect(self, origin, dirs: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
         """Ray parameter ``lam`` (x = origin + lam * dir) where each ray meets the ground, and
@@ -102,6 +143,22 @@ class GroundModel:
             d2 = ((x[:, None, :] - self.anchors[None]) ** 2).sum(-1)
             k = np.where(hits, np.argmin(d2, axis=1), k)
         return lam, hits & (lam > 0)
+
+
+def _window_plane(c2ws, clouds) -> tuple[tuple[np.ndarray, float] | None, str, str]:
+    """The first of ``clouds`` ((name, points or None), ...) that gives a ground plane under
+    ``c2ws``: ((normal, offset), its name, why the ones before it gave none), else (None, "", why)."""
+    why = ""
+    for name, cloud in clouds:
+        if cloud is None:
+            continue
+        try:
+            g = fit_ground(cloud, c2ws)
+        except AlignmentError as e:
+            why = why or str(e).split(";")[0]
+            continue
+        return (g.normal, g.offset), name, why
+    return None, "", why
 
 
 def pixel_rays(K, c2w, width: int, height: int) -> np.ndarray:
@@ -221,20 +278,27 @@ def _sample(src: SourceFrame, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def package_warper(manifest, cam, gaussians=None, config: WarpConfig = DEFAULT) -> GroundWarper:
     """The warper for camera ``cam`` of a package: the ground fitted to ``background.points``
-    (else the splat centres of ``gaussians``), every recorded frame a source, with the package's
-    depth where it measured, else the depth ``gaussians`` render."""
+    (else, and where they give none, the splat centres of ``gaussians``; then the fallbacks of
+    :meth:`GroundModel.fit`, the package's ground among them when it was imported), every recorded
+    frame a source, with the package's depth where it measured, else the depth ``gaussians`` render."""
     from ..io.images import read_image
     from ..io.points import read_points
 
     where = manifest.path or manifest.root
+    splats = None if gaussians is None else gaussians.means
     if manifest.background_points:
         points = read_points(manifest.resolve(manifest.background_points, "background.points"))[0]
-    elif gaussians is not None:
-        points = gaussians.means
+    elif splats is not None:
+        points, splats = splats, None
     else:
         raise WarpError(f"{where}: the geometry-guided warp fits the ground to background.points or the "
                         "background splats; the package has neither")
-    ground = GroundModel.fit(points, [cf.camera_to_world for cf in cam.frames], config)
+    imported = WORLD_GROUND if "ground_fit" in (manifest.source or {}) else None
+    try:
+        ground = GroundModel.fit(points, [cf.camera_to_world for cf in cam.frames], config, splats=splats,
+                                 package_ground=imported)
+    except WarpError as e:
+        raise WarpError(f"{where}: {e}") from None
     renderer = None
     sources = {}
     for fi, cf in enumerate(cam.frames):

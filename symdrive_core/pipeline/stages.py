@@ -17,7 +17,7 @@ import numpy as np
 from ..diffusion.adapt import AdaptConfig
 from ..diffusion.config import SAMPLERS, RefineConfig, SamplerConfig
 from ..insertion.config import HarmonizeConfig, InpaintConfig, InsertionConfig
-from ..scene.ground_truth import has_insertion_truth, has_lateral_truth
+from ..scene.ground_truth import has_insertion_truth, has_lateral_truth, scorable_lateral_truth
 
 
 @dataclass
@@ -276,7 +276,7 @@ def restore_stage(ctx) -> StageResult:
     from ..eval.restoration import run_lateral_restoration
     from ..eval.views import evaluate_lateral
     from ..io.images import read_image, write_image
-    from ..scene.ground_truth import truth_camera, with_lateral_offsets
+    from ..scene.ground_truth import truth_camera
     from ..splat.render import SplatRenderer
 
     m, opts, decision = ctx.manifest, ctx.options, ctx.plan.stage("restore")
@@ -286,10 +286,12 @@ def restore_stage(ctx) -> StageResult:
     offsets, scored_frames = decision.offsets, ctx.plan.window  # scoring: every truth frame in the window
     done: set[tuple[str, int, float]] = set()
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
-    metrics = {}
+    metrics, scored, unscored = {}, None, {}
     if ctx.plan.runs("evaluate") and has_lateral_truth(m):
+        scored, why = scorable_lateral_truth(m, offsets, scored_frames)
+        unscored = {"lateral_not_scored": why} if why else {}
+    if scored is not None:
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
-        scored = with_lateral_offsets(m, offsets)
         res = run_lateral_restoration(scored, g, model, methods=methods, sampler=sampler, frames=scored_frames,
                                       progress=ctx.progress, warper=warper(ctx, truth_camera(m)),
                                       render=render)
@@ -314,7 +316,9 @@ def restore_stage(ctx) -> StageResult:
             write_image(path, image)
         ctx.shared.restored.append(RestoredView.shifted(cam, fi, off, image))
     off = {"geometry_guided_off": dict(ctx.shared.warper_errors)} if ctx.shared.warper_errors else {}
-    return StageResult({"views_restored": len(ctx.shared.restored), "method": default, **off}, metrics)
+    grounds = {name: w.ground.summary() for name, w in ctx.shared.warpers.items() if w is not None}
+    return StageResult({"views_restored": len(ctx.shared.restored), "method": default, **off,
+                        **({"ground": grounds} if grounds else {}), **unscored}, metrics)
 
 
 def chain_step(opts: StageOptions, guided: bool) -> float:
@@ -346,10 +350,11 @@ def refine_stage(ctx) -> StageResult:
         # The loop's own time is part of the stage's row "seconds".
         details = {k: v for k, v in stats.items() if isinstance(v, (int, float)) and k not in ("seconds", "iters")}
     metrics = {}
-    offsets = {round(o, 6) for o in ctx.plan.stage("restore").offsets}
+    scored = None
     if ctx.plan.runs("evaluate") and has_lateral_truth(ctx.manifest):
-        metrics["lateral"] = [r for r in evaluate_lateral(ctx.manifest, refined, "refined", ctx.plan.window)
-                              if round(r["offset_m"], 6) in offsets]
+        scored = scorable_lateral_truth(ctx.manifest, ctx.plan.stage("restore").offsets, ctx.plan.window)[0]
+    if scored is not None:
+        metrics["lateral"] = evaluate_lateral(scored, refined, "refined", ctx.plan.window)
     return StageResult({"iterations": ctx.options.refine.iters, **details}, metrics)
 
 

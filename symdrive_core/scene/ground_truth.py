@@ -135,6 +135,22 @@ def with_lateral_offsets(manifest: Manifest, offsets) -> Manifest:
     return replace(manifest, ground_truth={**gt, "lateral": lateral})
 
 
+def scorable_lateral_truth(manifest: Manifest, offsets, frames: list[int] | None) -> tuple[Manifest | None, str]:
+    """``manifest`` keeping only the lateral truth at ``offsets`` (metres) of ``frames`` (None:
+    all), or None when none is left; and what goes unscored ("" when nothing). Restoring offsets
+    no truth was recorded at is the normal case (a stereo rig's truth sits at its baseline): the
+    caller restores them and scores the rest."""
+    kept = with_lateral_offsets(manifest, offsets)
+    views = [v for v in lateral_views(kept) if frames is None or v.frame in set(frames)]
+    have = {round(v.offset_m, 6) for v in views}
+    missing = [float(o) for o in offsets if round(float(o), 6) not in have]
+    recorded = sorted({float(e["offset_m"]) for e in (manifest.ground_truth or {}).get("lateral", [])})
+    why = "" if not missing else (
+        f"no lateral truth at {', '.join(f'{o:+g}' for o in missing)} m for the frames restored (the package's "
+        f"is at {', '.join(f'{o:+g}' for o in recorded)} m): restored, not scored")
+    return (kept if views else None), why
+
+
 def truth_camera(manifest: Manifest):
     """The package camera the ground truth is about (``ground_truth.camera``, else the first)."""
     name = (manifest.ground_truth or {}).get("camera")

@@ -227,3 +227,38 @@ def test_sparse_depth_without_splats_uses_the_measured_pixels_only(tmp_path):
     for src in warper.sources.values():
         stored = np.isfinite(src.depth) & (src.depth > 0)
         assert np.array_equal(src.ground, stored) and 0.02 < stored.mean() < 0.06
+
+
+def road_points(x_from: float, x_to: float, z=lambda x: 0.0 * x) -> np.ndarray:
+    """Road points every 0.5 m over x_from..x_to, 4 m either side of the path, at height z(x)."""
+    xy = np.stack(np.meshgrid(np.arange(x_from, x_to, 0.5), np.arange(-4.0, 4.1, 0.5)), -1).reshape(-1, 2)
+    return np.column_stack([xy, z(xy[:, 0])])
+
+
+def test_windows_without_points_under_them_borrow_a_plane_and_say_which():
+    """40 cameras 1 m apart; SfM found road only beyond x = 24 (the first windows have none)."""
+    c2ws = [forward_camera(float(i)) for i in range(40)]
+    model = GroundModel.fit(road_points(24.0, 50.0), c2ws)
+    assert model.sources[:3] == ["nearest", "nearest", "neighbour"] and set(model.sources[4:]) == {"points"}
+    assert np.allclose(model.normals, [0, 0, 1]) and np.allclose(model.offsets, 0.0, atol=1e-9)
+    summary = model.summary()
+    assert summary["planes"] == {"points": model.sources.count("points"), "neighbour": 2, "nearest": 2}
+    first = summary["other_than_points"][0]
+    assert first["cameras"] == [0, 8] and first["plane"] == "nearest" and "points under the camera path" in first["why"]
+
+    # The package's own ground comes before a window farther than neighbour_windows away.
+    tilted = (np.array([0.0, 0.0, 1.0]), -0.05)
+    model = GroundModel.fit(road_points(24.0, 50.0), c2ws, package_ground=tilted)
+    assert model.sources[:2] == ["package", "package"] and np.allclose(model.offsets[:2], -0.05)
+
+    # The reconstruction's splat centres come first, where they cover the road.
+    model = GroundModel.fit(road_points(24.0, 50.0), c2ws, splats=road_points(-5.0, 50.0, lambda x: 0.01 + 0 * x))
+    assert model.sources[:3] == ["splats"] * 3 and np.allclose(model.offsets[:3], -0.01)
+
+
+def test_no_ground_anywhere_is_one_line_naming_the_cameras():
+    c2ws = [forward_camera(float(i)) for i in range(12)]
+    with pytest.raises(WarpError, match="no ground under cameras 0 to 11: no ground plane: 0 points under"):
+        GroundModel.fit(road_points(60.0, 70.0), c2ws)
+    model = GroundModel.fit(road_points(60.0, 70.0), c2ws, package_ground=(np.array([0.0, 0.0, 1.0]), 0.0))
+    assert set(model.sources) == {"package"}
