@@ -57,10 +57,11 @@ def add_commands(sub) -> None:
                    help="undistort cameras with lens distortion (OPENCV, OPENCV_FISHEYE) with COLMAP's undistorter: "
                         "PINHOLE cameras, resampled images copied into the package")
     p.set_defaults(func=_nerfstudio)
-    p = isub.add_parser("kitti", help="KITTI odometry sequence (rectified stereo pair, calib.txt, poses): the left "
-                                      "camera, the right one as lateral ground truth")
+    p = isub.add_parser("kitti", help="KITTI odometry sequence (one camera or a rectified stereo pair, calib.txt, "
+                                      "poses): the left camera, a pair's right one as lateral ground truth")
     p.add_argument("sequence", metavar="SEQUENCE_DIR",
-                   help="folder with image_2/image_3 (or image_0/image_1, image_l/image_r) and calib.txt")
+                   help="folder with image_2/image_3 (or image_0/image_1, image_l/image_r), or one of them alone, "
+                        "and calib.txt")
     p.add_argument("--poses", help="the sequence's poses file, metres (default: SEQUENCE_DIR/poses.txt)")
     _common(p, images=False)
     p.set_defaults(func=_kitti)
@@ -75,8 +76,12 @@ def add_commands(sub) -> None:
                    help="one scan per package frame, in name order: KITTI velodyne .bin, .npz with 'points', or .ply")
     p.add_argument("--sensor-to-camera", required=True, metavar="FILE",
                    help="the LiDAR-to-camera rigid transform: 12 or 16 numbers (row-major 3x4 or 4x4), or a KITTI "
-                        "calibration file (Tr_velo_to_cam with R0_rect, or R and T)")
+                        "calibration file (odometry calib.txt, tracking or object calib, raw calib_velo_to_cam.txt "
+                        "with calib_cam_to_cam.txt beside it)")
     p.add_argument("--camera", help="the package camera the scans are projected into (default: the first)")
+    p.add_argument("--kitti-camera", type=int, metavar="N",
+                   help="the KITTI camera (0-3) the package camera is, for a KITTI calibration file (default: the one "
+                        "a KITTI import notes in the package, else 0)")
     p.add_argument("--min-depth", type=float, metavar="M",
                    help="drop returns nearer to the camera than this, in metres (default: LidarConfig)")
     p.add_argument("--force", action="store_true", help="replace the camera's depth maps if it has some")
@@ -255,7 +260,11 @@ def _kitti(args) -> int:
     opt = _options(args)
     src, right = read_kitti(args.sequence, args.poses, splats=args.splats, camera_name=args.camera_name,
                             fps=args.fps)
-    src.grouped, src.lateral = split_rig(src.grouped, right)
+    if right is None:
+        print(f"one camera: {src.notes['image_folder']} (KITTI camera {src.notes['kitti_camera']}), no lateral "
+              "ground truth")
+    else:
+        src.grouped, src.lateral = split_rig(src.grouped, right)
     # KITTI's poses are metric: scale 1, and the ground --camera-height below the cameras' median
     # height. Its plane is the one the camera path rides on (points need not be triangulated).
     c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
@@ -277,7 +286,7 @@ def _lidar(args) -> int:
     from dataclasses import replace
 
     from ..errors import InputError
-    from ..importers.lidar import LidarConfig, import_lidar, read_sensor_to_camera
+    from ..importers.lidar import LidarConfig, import_lidar
 
     t0 = time.perf_counter()
     config = LidarConfig()
@@ -285,9 +294,9 @@ def _lidar(args) -> int:
         if not args.min_depth >= 0:
             raise InputError("--min-depth", f"expected a distance >= 0 in metres, got {args.min_depth}")
         config = replace(config, min_depth_m=args.min_depth)
-    T = read_sensor_to_camera(args.sensor_to_camera)
-    info = import_lidar(args.package, args.scans, T, camera=args.camera, force=args.force, config=config,
-                        progress=not args.quiet)
+    info = import_lidar(args.package, args.scans, args.sensor_to_camera, camera=args.camera,
+                        kitti_camera=args.kitti_camera, force=args.force, config=config, progress=not args.quiet)
+    print(f"sensor to camera: {info['calibration']}")
     print(f"{info['package']}: sparse depth for camera {info['camera']} in {info['folder']}/ from {info['frames']} "
           f"scans ({info['points']} points, {100 * info['measured_fraction']:.1f}% of pixels measured; "
           f"{time.perf_counter() - t0:.1f} s)")

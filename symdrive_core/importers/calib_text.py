@@ -1,25 +1,53 @@
 """Numbers in the text files that come with a recorded drive (calibration, poses, timestamps).
 
-One reader for KITTI's ``calib.txt``, poses and ``times.txt`` and for a LiDAR's sensor-to-camera
-transform, so a malformed line is refused the same way everywhere: naming the file and the entry.
+One reader for KITTI's calibration files, poses and ``times.txt`` and for a LiDAR's
+sensor-to-camera transform, so a malformed line is refused the same way everywhere: naming the
+file and the entry.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 
+_LABEL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?::|\s)(.*)$")
 
-def finite_numbers(text: str, count: int, path: Path, where: str) -> np.ndarray:
+
+def finite_numbers(text: str, count: int | tuple[int, ...], path: Path, where: str) -> np.ndarray:
     """The ``count`` finite numbers of ``text`` (separated by spaces or commas), float64; anything
-    else is an :class:`InputError` naming ``path`` and ``where``."""
+    else is an :class:`InputError` naming ``path`` and ``where``. A tuple of counts accepts any of
+    them (a rotation written as 3x3 or 3x4)."""
+    counts = (count,) if isinstance(count, int) else count
+    expected = " or ".join(str(c) for c in counts)
     try:
         v = np.array([float(x) for x in text.replace(",", " ").split()], dtype=np.float64)
     except ValueError:
-        raise InputError(path, f"expected {count} numbers", where) from None
-    if len(v) != count or not np.isfinite(v).all():
-        raise InputError(path, f"expected {count} finite numbers, got {len(v)}", where)
+        raise InputError(path, f"expected {expected} numbers", where) from None
+    if len(v) not in counts or not np.isfinite(v).all():
+        raise InputError(path, f"expected {expected} finite numbers, got {len(v)}", where)
     return v
+
+
+def labelled_lines(lines: list[str]) -> list[tuple[str | None, str]]:
+    """(label, the rest) of each line: ``label: ...`` or ``label ...`` (KITTI's tracking files
+    write ``R_rect`` and ``Tr_velo_cam`` without the colon), and ``(None, line)`` for a line of
+    numbers alone."""
+    out = []
+    for line in lines:
+        m = _LABEL.match(line)
+        out.append((m.group(1), m.group(2)) if m else (None, line))
+    return out
+
+
+def read_small_text(path: Path, field: str, limit: int = 1 << 20) -> str:
+    """The text of a calibration file: a regular file of at most ``limit`` bytes (a larger one is
+    no calibration, and is not read whole)."""
+    from ..io import check_regular
+
+    if check_regular(path, field).st_size > limit:
+        raise InputError(path, f"larger than {limit >> 20} MB: not a calibration file", field)
+    return Path(path).read_text(encoding="utf-8", errors="replace")

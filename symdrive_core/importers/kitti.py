@@ -1,9 +1,12 @@
-"""A KITTI odometry sequence (or an excerpt of one) -> :class:`~.package.Source` of a stereo rig.
+"""A KITTI odometry sequence (or an excerpt of one) -> :class:`~.package.Source` of one camera or
+a stereo rig.
 
 The sequence folder holds one folder per rectified camera (``image_2``/``image_3`` colour,
 ``image_0``/``image_1`` grey, or ``image_l``/``image_r`` as visual-odometry tutorials copy them;
-the first pair found in that order is read), ``calib.txt`` with the rectified projection matrices
-(``P0: ...`` lines, or unlabelled lines in the order P0, P1, ...) and optionally ``times.txt``.
+the first pair found in that order is read, else the one camera folder found first in that order:
+most published excerpts hold ``image_2`` alone), ``calib.txt`` with the rectified projection
+matrices (``P0: ...`` lines, or unlabelled lines in the order P0, P1, ...) and optionally
+``times.txt``.
 The poses file has one line per frame: camera 0's camera-to-world 3x4 in metres, in camera 0's
 frame at the first frame (OpenCV axes). Images are named by frame number (``000123.png``), so an
 excerpt is read with the sequence's full poses file.
@@ -11,24 +14,26 @@ excerpt is read with the sequence's full poses file.
 Rectified cameras share camera 0's rotation: camera i projects with ``P_i = K_i [I | t_i]`` and
 sits at ``-t_i`` in camera 0's frame (``t_i = K_i^-1 P_i[:, 3]``; KITTI's P1 has
 ``t_x = -0.54 m``: the right camera is 0.54 m to the right). KITTI puts pixel centres at
-integer coordinates; the package's K puts them at +0.5.
+integer coordinates; the package's K puts them at +0.5. The source notes which KITTI camera the
+package holds (``kitti_camera``), so its LiDAR is composed to that camera (:mod:`.kitti_calib`).
 """
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .calib_text import finite_numbers
+from .calib_text import finite_numbers, labelled_lines
 from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
+from .kitti_calib import camera_offset, projection
 from .package import Source
 from .stereo import RigTolerance, check_pair
 
 PAIRS = (("image_2", "image_3"), ("image_0", "image_1"), ("image_l", "image_r"))
+SINGLES = tuple(folder for pair in zip(*PAIRS) for folder in pair)  # left cameras first
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
@@ -44,26 +49,11 @@ def _read_lines(path: Path, what: str) -> list[str]:
 def read_calib(path: Path) -> dict[str, np.ndarray]:
     """Projection matrices by name (``P0``, ``P1``, ...), each 3x4, checked to be ``K [I | t]``."""
     out = {}
-    for i, line in enumerate(_read_lines(path, "calib.txt")):
-        label, sep, rest = line.partition(":")
-        if not sep:
-            label, rest = f"P{i}", line
-        label = label.strip()
-        if not re.fullmatch(r"P\d", label):
-            continue  # Tr (velodyne to camera) and the like: not a camera
-        P = finite_numbers(rest, 12, path, label).reshape(3, 4)
-        K = P[:, :3]
-        if not (np.allclose(K[[1, 2, 2], [0, 0, 1]], 0) and np.isclose(K[2, 2], 1) and K[0, 0] > 0 and K[1, 1] > 0
-                and abs(K[0, 1]) < 1e-9 * K[0, 0]):
-            raise InputError(path, "not a rectified projection K [I | t] (left 3x3 must be an upper-triangular K "
-                             "with no skew and K[2,2] = 1)", label)
-        out[label] = P
+    for i, (label, rest) in enumerate(labelled_lines(_read_lines(path, "calib.txt"))):
+        label = f"P{i}" if label is None else label
+        if len(label) == 2 and label[0] == "P" and label[1].isdigit():
+            out[label] = projection(rest, path, label)  # Tr, R_rect and the like are not cameras
     return out
-
-
-def camera_offset(P: np.ndarray) -> np.ndarray:
-    """Where the camera of ``P = K [I | t]`` sits in camera 0's frame: ``-t``."""
-    return -np.linalg.solve(P[:, :3], P[:, 3])
 
 
 def read_poses(path: Path) -> list[np.ndarray]:
@@ -78,12 +68,15 @@ def read_poses(path: Path) -> list[np.ndarray]:
     return out
 
 
-def find_pair(sequence: Path) -> tuple[str, str]:
+def find_cameras(sequence: Path) -> tuple[str, ...]:
+    """The image folders to read: the first stereo pair found, else the first single camera."""
     for pair in PAIRS:
         if all((sequence / p).is_dir() for p in pair):
             return pair
-    raise InputError(sequence, "no stereo pair of image folders (" + ", ".join("/".join(p) for p in PAIRS) + ")",
-                     "SEQUENCE_DIR")
+    for folder in SINGLES:
+        if (sequence / folder).is_dir():
+            return (folder,)
+    raise InputError(sequence, "no image folder (" + ", ".join(SINGLES) + ")", "SEQUENCE_DIR")
 
 
 def _projection_name(folder: str) -> str:
@@ -108,16 +101,16 @@ def _times(path: Path) -> list[float] | None:
 
 
 def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats: str | Path | None = None,
-               camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> tuple[Source, str]:
-    """(the rig as a source with two cameras, the right camera's name): the left camera is
-    ``camera_name``, the right one ``{camera_name}_right``; a splat PLY (``splats``) is taken to be
-    in the poses' frame."""
+               camera_name: str = DEFAULT_CAMERA, fps: float = DEFAULT_FPS) -> tuple[Source, str | None]:
+    """(the sequence as a source, the right camera's name or None): the left (or only) camera is
+    ``camera_name``, a stereo pair's right one ``{camera_name}_right``; a splat PLY (``splats``) is
+    taken to be in the poses' frame."""
     from ..io.images import image_size
 
     sequence = Path(sequence)
     if not sequence.is_dir():
         raise InputError(sequence, "not a folder (expected a KITTI odometry sequence)", "SEQUENCE_DIR")
-    pair = find_pair(sequence)
+    folders = find_cameras(sequence)
     calib_path = sequence / "calib.txt"
     calib = read_calib(calib_path)
     poses_path = Path(poses) if poses is not None else sequence / "poses.txt"
@@ -125,9 +118,9 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats:
         raise InputError(poses_path, "file not found; pass the sequence's poses file with --poses", "--poses")
     c2w0 = read_poses(poses_path)
     times = _times(sequence / "times.txt")
-    right = f"{camera_name}_right"
+    right = f"{camera_name}_right" if len(folders) == 2 else None
     rig = []  # per camera: (name, projection label, K, offset from camera 0, images, width, height)
-    for folder, cam in zip(pair, (camera_name, right)):
+    for folder, cam in zip(folders, (camera_name, right)):
         label = _projection_name(folder)
         if label not in calib:
             raise InputError(calib_path, f"no projection matrix for {folder}", label)
@@ -139,15 +132,10 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats:
         width, height, _ = image_size(first, folder)
         rig.append((cam, label, conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5), offset,
                     frames, width, height))
-    (_, _, _, _, _, w0, h0), (_, _, _, _, frames1, w1, h1) = rig
-    if (w1, h1) != (w0, h0):
-        image = frames1[min(frames1)]
-        raise InputError(image, f"image is {w1}x{h1}, the {pair[0]} images are {w0}x{h0}: not a rectified pair",
-                         pair[1])
-    check_pair(*(View(name=label, K=K, width=w, height=h, c2w=offset, source=calib_path, where=label)
-                 for _, label, K, offset, _, w, h in rig), RigTolerance())
+    if right is not None:
+        _check_rig(rig, folders, calib_path)
     views = []
-    for (cam, label, K, offset, frames, width, height), folder in zip(rig, pair):
+    for (cam, label, K, offset, frames, width, height), folder in zip(rig, folders):
         for n, image in sorted(frames.items()):
             if n >= len(c2w0):
                 raise InputError(poses_path, f"no pose for frame {n} ({folder}/{image.name}); the file has "
@@ -164,5 +152,19 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats:
         from ..io.ply import read_splats
 
         g = read_splats(splats)
+    # Which KITTI camera the package holds: every KITTI Velodyne transform is composed to it.
+    notes = {"poses_file": str(poses_path), "kitti_camera": int(rig[0][1][1:])}
+    notes.update({"stereo_pair": list(folders)} if right is not None else {"image_folder": folders[0]})
     return Source("kitti", sequence, grouped, splats=g, splats_path=None if splats is None else Path(splats),
-                  notes={"poses_file": str(poses_path), "stereo_pair": list(pair)}), right
+                  notes=notes), right
+
+
+def _check_rig(rig: list[tuple], pair: tuple[str, str], calib_path: Path) -> None:
+    """The pair's images share one size and its projections make a rectified rig."""
+    (_, _, _, _, _, w0, h0), (_, _, _, _, frames1, w1, h1) = rig
+    if (w1, h1) != (w0, h0):
+        image = frames1[min(frames1)]
+        raise InputError(image, f"image is {w1}x{h1}, the {pair[0]} images are {w0}x{h0}: not a rectified pair",
+                         pair[1])
+    check_pair(*(View(name=label, K=K, width=w, height=h, c2w=offset, source=calib_path, where=label)
+                 for _, label, K, offset, _, w, h in rig), RigTolerance())

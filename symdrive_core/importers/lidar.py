@@ -14,7 +14,6 @@ takes the gaps for sky. Depths are in the scan's metres: the package's world mus
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,13 +22,13 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..io import check_regular
-from .calib_text import finite_numbers
+from .calib_text import finite_numbers, read_small_text
 from .frames import natural_key
+from .kitti_calib import CAMERAS, REFERENCE_CAMERA, labels_of, layout_of, velo_to_camera
 
 SCAN_SUFFIXES = (".bin", ".npz", ".ply")
 DEPTH_FOLDER = "lidar_depth"
 MAX_SCAN_BYTES = 1 << 30  # a 128-beam scan is tens of MB; this stops a hostile file, not a real one
-_KEYED_LINE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*:(.*)$")
 
 
 @dataclass(frozen=True)
@@ -83,46 +82,28 @@ def _npz_points(path: Path) -> np.ndarray:
     return points[:, :3]
 
 
-def read_sensor_to_camera(path: Path) -> np.ndarray:
-    """The rig's rigid sensor-to-camera transform [4, 4] from a text file: 12 or 16 numbers (a
-    row-major 3x4 or 4x4), or a KITTI calibration file (``Tr_velo_to_cam`` followed by ``R0_rect``
-    when present, as KITTI projects into its rectified camera; or ``R`` and ``T`` as in
-    ``calib_velo_to_cam.txt``)."""
+def read_sensor_to_camera(path: Path, kitti_camera: int | None = None) -> tuple[np.ndarray, str]:
+    """(the rig's rigid sensor-to-camera transform [4, 4], a line saying how it was read) from a
+    text file: 12 or 16 numbers (a row-major 3x4 or 4x4) into the package camera, or a KITTI
+    calibration file of any layout (:mod:`.kitti_calib`) composed to KITTI camera ``kitti_camera``
+    (None: camera 0, and the line says so)."""
     path = Path(path)
-    if check_regular(path, "--sensor-to-camera").st_size > 1 << 20:
-        raise InputError(path, "larger than 1 MB: not a calibration file", "--sensor-to-camera")
-    text = path.read_text(encoding="utf-8", errors="replace")
-    keyed = {}
-    for line in text.splitlines():
-        m = _KEYED_LINE.match(line)
-        if m:
-            keyed[m.group(1)] = m.group(2)
-
-    def numbers(text: str, count: int, where: str) -> np.ndarray:
-        return finite_numbers(text, count, path, where)
-
+    text = read_small_text(path, "--sensor-to-camera")
+    labels = labels_of(text)
+    if layout_of(labels) is not None:
+        T, how = velo_to_camera(path, labels, REFERENCE_CAMERA if kitti_camera is None else kitti_camera)
+        if kitti_camera is None:
+            how += "; the package does not say which KITTI camera it holds: camera 0 (--kitti-camera N for another)"
+        return T, how
+    text = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+    count = len(text.replace(",", " ").split())
+    v = finite_numbers(text, 16 if count == 16 else 12, path, "transform")
     T = np.eye(4)
-    if "Tr_velo_to_cam" in keyed:
-        T[:3] = numbers(keyed["Tr_velo_to_cam"], 12, "Tr_velo_to_cam").reshape(3, 4)
-        if "R0_rect" in keyed:
-            rect = np.eye(4)
-            rect[:3, :3] = numbers(keyed["R0_rect"], 9, "R0_rect").reshape(3, 3)
-            T = rect @ T
-        where = "Tr_velo_to_cam"
-    elif "R" in keyed and "T" in keyed:
-        T[:3, :3] = numbers(keyed["R"], 9, "R").reshape(3, 3)
-        T[:3, 3] = numbers(keyed["T"], 3, "T")
-        where = "R"
-    else:
-        text = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
-        count = len(text.replace(",", " ").split())
-        where = "transform"
-        v = numbers(text, 16 if count == 16 else 12, where)
-        T[: len(v) // 4] = v.reshape(-1, 4)
+    T[: len(v) // 4] = v.reshape(-1, 4)
     if not conventions.is_rigid(T):
         raise InputError(path, "not a rigid transform (rotation must be orthonormal, det +1; "
-                               "last row 0 0 0 1)", where)
-    return T
+                               "last row 0 0 0 1)", "transform")
+    return T, f"{len(v)} numbers: the transform into the package camera as written"
 
 
 def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
@@ -148,12 +129,15 @@ def list_scans(folder: Path) -> list[Path]:
     return sorted(scans, key=lambda p: natural_key(p.name))
 
 
-def import_lidar(package, scans_dir, sensor_to_camera: np.ndarray, *, camera: str | None = None,
+def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, kitti_camera: int | None = None,
                  force: bool = False, config: LidarConfig = LidarConfig(), progress: bool = True) -> dict:
     """Write one sparse depth map per frame of ``camera`` (default: the package's first) from the
-    scans in ``scans_dir`` and point the camera's frames at them. The maps are written whole into
-    the package (a temporary folder renamed into place) before the manifest names them; bad
-    input leaves the package as it was. Returns a summary (frames, points, measured fraction)."""
+    scans in ``scans_dir``, moved into the camera by the ``calibration`` file
+    (:func:`read_sensor_to_camera`; a KITTI one composed to ``kitti_camera``, else to the KITTI
+    camera the package's source notes, else to camera 0), and point the camera's frames at them.
+    The maps are written whole into the package (a temporary folder renamed into place) before
+    the manifest names them; bad input leaves the package as it was. Returns a summary (frames,
+    points, measured fraction, how the calibration was read)."""
     from tqdm import tqdm
 
     from ..io.atomic import atomic_directory
@@ -168,6 +152,13 @@ def import_lidar(package, scans_dir, sensor_to_camera: np.ndarray, *, camera: st
         raise InputError(where, f"no camera named {camera!r} (has: {', '.join(c.name for c in m.cameras)})",
                          "--camera") from None
     ci = m.cameras.index(cam)
+    held = m.source.get("kitti_camera")
+    if kitti_camera is None and held is not None:
+        if isinstance(held, bool) or not isinstance(held, int) or held not in CAMERAS:
+            raise InputError(where, f"not a KITTI camera ({', '.join(map(str, CAMERAS))}): {held!r}",
+                             "source.kitti_camera")
+        kitti_camera = held
+    sensor_to_camera, how = read_sensor_to_camera(calibration, kitti_camera)
     scans = list_scans(scans_dir)
     if len(scans) != len(cam.frames):
         raise InputError(scans_dir, f"{len(scans)} scans ({', '.join(SCAN_SUFFIXES)}) for {len(cam.frames)} "
@@ -203,4 +194,5 @@ def import_lidar(package, scans_dir, sensor_to_camera: np.ndarray, *, camera: st
     cam.depth_zero = "unmeasured"
     m.save()
     return {"package": str(m.root), "camera": cam.name, "frames": len(scans), "points": points,
-            "measured_fraction": float(np.mean(coverage)), "folder": f"{DEPTH_FOLDER}/{cam.name}"}
+            "measured_fraction": float(np.mean(coverage)), "folder": f"{DEPTH_FOLDER}/{cam.name}",
+            "calibration": how}

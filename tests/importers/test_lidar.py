@@ -109,7 +109,9 @@ def test_imported_depth_is_the_truth_at_the_scanned_pixels_and_unmeasured_elsewh
     assert 0.01 < np.mean([mk.mean() for mk in masks]) < 0.05
 
 
-def test_kitti_calibration_composes_the_rectification(tmp_path):
+def test_kitti_calibration_composes_the_rectification_and_plain_numbers_are_as_written(tmp_path):
+    """Camera 0 of an object-layout file is the rectified Velodyne transform (the layouts and the
+    other cameras: test_kitti_mono.py); 16 numbers are a 4x4 into the package camera."""
     T = velo_to_cam()
     rect = quat_to_matrix(np.array([1.0, 0.004, -0.003, 0.002]) / np.linalg.norm([1.0, 0.004, -0.003, 0.002]))
     f = tmp_path / "calib.txt"
@@ -118,12 +120,13 @@ def test_kitti_calibration_composes_the_rectification(tmp_path):
                  + "Tr_velo_to_cam: " + " ".join(f"{v:.17g}" for v in T[:3].ravel()) + "\n")
     R4 = np.eye(4)
     R4[:3, :3] = rect
-    np.testing.assert_allclose(read_sensor_to_camera(f), R4 @ T, atol=1e-12)
-    f.write_text("calib_time: 09-Jan-2012 14:00:21\nR: " + " ".join(f"{v:.17g}" for v in T[:3, :3].ravel())
-                 + "\nT: " + " ".join(f"{v:.17g}" for v in T[:3, 3]) + "\n")
-    np.testing.assert_allclose(read_sensor_to_camera(f), T, atol=1e-12)
+    got, how = read_sensor_to_camera(f)
+    np.testing.assert_allclose(got, R4 @ T, atol=1e-12)
+    assert "camera 0 (--kitti-camera N for another)" in how
     f.write_text(" ".join(f"{v:.17g}" for v in T.ravel()))
-    np.testing.assert_allclose(read_sensor_to_camera(f), T, atol=1e-12)
+    got, how = read_sensor_to_camera(f, kitti_camera=2)
+    np.testing.assert_allclose(got, T, atol=1e-12)
+    assert how.startswith("16 numbers")
 
 
 def test_z_buffer_keeps_the_nearest_return_and_drops_what_is_too_near():
