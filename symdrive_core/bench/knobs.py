@@ -105,11 +105,11 @@ def renderer_settings(manifest, gaussians, budget: Budget) -> list[Setting]:
     ]
 
 
-def lane_iou(rows: list[dict]) -> dict:
-    """Mean ``lane_iou`` of lateral rows (IoU points), where the rows carry it."""
-    if rows and all("lane_iou" in r for r in rows):
-        return {"lane_iou": float(np.mean([r["lane_iou"] for r in rows]))}
-    return {}
+def lateral_quality(rows: list[dict]) -> dict:
+    """Means of lateral rows' ``psnr``, ``ssim``, ``psnr_cc`` and ``lane_iou`` (IoU points), each
+    where every row carries it (a package without lane masks has no lane IoU)."""
+    return {k: float(np.mean([r[k] for r in rows])) for k in ("psnr", "ssim", "psnr_cc", "lane_iou")
+            if rows and all(k in r for r in rows)}
 
 
 def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Setting]:
@@ -132,8 +132,8 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
     def raw() -> dict:  # the reference every restoration setting should beat
         t0 = time.perf_counter()
         rows = evaluate_lateral(scoped, gaussians, "raw_3dgs", frames)
-        return {"psnr": float(np.mean([r["psnr"] for r in rows])), "ssim": float(np.mean([r["ssim"] for r in rows])),
-                **lane_iou(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows), "per": "view"}
+        return {**lateral_quality(rows), "seconds": (time.perf_counter() - t0) / sum(r["frames"] for r in rows),
+                "per": "view"}
 
     def measure(method: str, **sampler):
         config = replace(DEFAULTS.sampler, max_memory_gib=None, **sampler)
@@ -143,9 +143,7 @@ def restorer_settings(manifest, gaussians, restorer, budget: Budget) -> list[Set
             res = run_lateral_restoration(scoped, gaussians, restorer, methods=(method,), frames=frames,
                                           sampler=config, progress=False, warper=warper)
             views = len(res.views.get(method, []))
-            return {"psnr": float(np.mean([r["psnr"] for r in res.rows])),
-                    "ssim": float(np.mean([r["ssim"] for r in res.rows])), **lane_iou(res.rows),
-                    "seconds": (time.perf_counter() - t0) / max(views, 1), "per": "view"}
+            return {**lateral_quality(res.rows), "seconds": (time.perf_counter() - t0) / max(views, 1), "per": "view"}
         return run
 
     unguided, guided = chain_method(DEFAULTS, guided=False), chain_method(DEFAULTS, guided=True)

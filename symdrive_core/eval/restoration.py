@@ -89,7 +89,7 @@ def run_lateral_restoration(
 
 
 def evaluate_lateral_restoration(manifest: Manifest, gaussians: Gaussians, model, **options) -> list[dict]:
-    """``metrics.lateral`` rows (``{"offset_m", "method", "psnr", "ssim", ...}``) for each method;
+    """``metrics.lateral`` rows (``{"offset_m", "method", "psnr", "ssim", "psnr_cc", ...}``) for each method;
     options as :func:`run_lateral_restoration`."""
     return run_lateral_restoration(manifest, gaussians, model, **options).rows
 

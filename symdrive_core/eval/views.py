@@ -4,8 +4,8 @@
 drive seen from cameras moved sideways (the degradation the restoration stage must fix), one
 row per offset as ``report.json``'s ``metrics.lateral`` expects; the row helpers here are the
 one lateral scorer, which the restoration's evaluation uses for its methods too.
-PSNR in dB and SSIM (3DGS flavour, ``symdrive_core.metrics``) on [0, 1] images, averaged
-over frames.
+PSNR in dB, SSIM (3DGS flavour) and, on lateral views, the colour-corrected ``psnr_cc``
+(``symdrive_core.metrics``) on [0, 1] images, averaged over frames.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import torch
 
 from ..gaussians import Gaussians
 from ..io.images import read_image
-from ..metrics import psnr, ssim
+from ..metrics import psnr, psnr_cc, ssim
 from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..scene.ground_truth import lateral_views, missing_truth, require_truth, split_frames
@@ -37,7 +37,8 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     for i in frames:
         cf = cam.frames[i]
         pred = render(CameraView.of_frame(cam, i), i)
-        scores.append(score_view(pred, read_image(manifest.resolve(cf.image), channels=3), None))
+        gt = read_image(manifest.resolve(cf.image), channels=3)
+        scores.append((psnr(pred, gt), ssim(pred, gt)))
     p, s = np.mean(scores, axis=0)
     return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
 
@@ -110,27 +111,33 @@ def with_ceiling(lanes, gt: np.ndarray, offset: float, ceilings: dict[float, lis
     return lanes
 
 
-def score_view(img: np.ndarray, gt: np.ndarray, lanes) -> tuple[float, ...]:
-    """(PSNR, SSIM) against the Cycles image, and lane IoU where the view has a lane mask."""
-    return (psnr(img, gt), ssim(img, gt)) + (() if lanes is None else (lanes.iou(img),))
+def score_view(img: np.ndarray, gt: np.ndarray, lanes) -> dict[str, float]:
+    """``psnr``, ``ssim`` and ``psnr_cc`` against the truth image, and ``lane_iou`` (0 to 1) where
+    the view has a lane mask. Every method's view, the raw render's included, goes through this
+    one scorer, so each gets the same colour fit."""
+    scores = {"psnr": psnr(img, gt), "ssim": ssim(img, gt), "psnr_cc": psnr_cc(img, gt)}
+    if lanes is not None:
+        scores["lane_iou"] = lanes.iou(img)
+    return scores
 
 
-def lateral_rows(scores: dict[tuple[float, str], list], seconds: dict[str, float],
+def lateral_rows(scores: dict[tuple[float, str], list[dict]], seconds: dict[str, float],
           ceilings: dict[float, list[float]]) -> list[dict]:
-    """One row per (offset, method): PSNR, SSIM and, where every view has a lane mask,
-    ``lane_iou`` and its ceiling ``lane_iou_ceiling`` in IoU points (0 to 100)."""
+    """One row per (offset, method) from :func:`score_view`'s scores: ``psnr``, ``ssim``,
+    ``psnr_cc`` and, where every view has a lane mask, ``lane_iou`` and its ceiling
+    ``lane_iou_ceiling`` in IoU points (0 to 100)."""
     rows = []
     for (off, method), vals in sorted(scores.items(), key=lambda kv: (abs(kv[0][0]), kv[0][0], kv[0][1])):
-        p, s = np.mean([v[:2] for v in vals], axis=0)
         row = {
             "offset_m": off,
             "method": method,
-            "psnr": round(float(p), 3),
-            "ssim": round(float(s), 4),
+            "psnr": round(float(np.mean([v["psnr"] for v in vals])), 3),
+            "ssim": round(float(np.mean([v["ssim"] for v in vals])), 4),
+            "psnr_cc": round(float(np.mean([v["psnr_cc"] for v in vals])), 3),
             "frames": len(vals),
         }
-        if all(len(v) == 3 for v in vals):
-            row["lane_iou"] = round(100.0 * float(np.mean([v[2] for v in vals])), 2)
+        if all("lane_iou" in v for v in vals):
+            row["lane_iou"] = round(100.0 * float(np.mean([v["lane_iou"] for v in vals])), 2)
             row["lane_iou_ceiling"] = round(100.0 * float(np.mean(ceilings[off])), 2)
         if method in seconds:
             row["seconds_per_view"] = round(seconds[method], 3)

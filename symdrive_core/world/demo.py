@@ -215,11 +215,12 @@ def format_markdown(report: dict, figures: Path) -> str:
         lines += ["", "## Reconstruction (held-out frames)", "",
                   f"PSNR {rec['psnr_heldout']:.2f} dB, SSIM {rec['ssim_heldout']:.3f} over {rec['frames']} frames."]
     if report["metrics"].get("lateral"):
-        lines += ["", "## Lateral novel views", "", "| offset (m) | method | PSNR | SSIM | lane IoU (ceiling) |",
-                  "|---|---|---|---|---|"]
+        lines += ["", "## Lateral novel views", "",
+                  "| offset (m) | method | PSNR | PSNR-cc | SSIM | lane IoU (ceiling) |", "|---|---|---|---|---|---|"]
         for r in report["metrics"]["lateral"]:
             lane = f"{r['lane_iou']:.1f} ({r['lane_iou_ceiling']:.1f})" if "lane_iou" in r else ""
-            lines.append(f"| {r['offset_m']:+g} | {r['method']} | {r['psnr']:.2f} | {r['ssim']:.3f} | {lane} |")
+            cc = f"{r['psnr_cc']:.2f}" if "psnr_cc" in r else ""  # rows an older run stored lack it
+            lines.append(f"| {r['offset_m']:+g} | {r['method']} | {r['psnr']:.2f} | {cc} | {r['ssim']:.3f} | {lane} |")
         lines += ["", "![lateral PSNR](figures/lateral_psnr.png)", "", "![lateral views](figures/lateral.png)"]
     if report["metrics"].get("insertion"):
         lines += ["", "## Vehicle insertion (held-out placements)", "",

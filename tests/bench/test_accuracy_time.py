@@ -5,7 +5,7 @@ import json
 import pytest
 
 from symdrive_core.bench.accuracy_time import Setting, format_table, run_settings, write_outputs
-from symdrive_core.bench.knobs import Budget, lane_iou, renderer_settings, shadow_settings, spread
+from symdrive_core.bench.knobs import Budget, lateral_quality, renderer_settings, shadow_settings, spread
 from symdrive_core.cli import main
 from symdrive_core.io.images import read_image
 from symdrive_core.io.ply import read_splats
@@ -25,14 +25,17 @@ def test_pareto_marks_and_outputs(tmp_path):
     assert read_image(paths["png"]).ndim == 3
 
 
-def test_lane_iou_is_a_column_where_the_rows_carry_it():
-    assert lane_iou([{"lane_iou": 10.0}, {"lane_iou": 20.0}]) == {"lane_iou": 15.0}
-    assert lane_iou([{"lane_iou": 10.0}, {"psnr": 20.0}]) == {}  # a package without lane masks
-    settings = [Setting("d", "0.5 m", True, lambda: {"seconds": 1.0, "psnr": 21.0, "lane_iou": 3.44}),
+def test_lane_iou_and_psnr_cc_are_columns_where_the_rows_carry_them():
+    rows = [{"psnr": 20.0, "ssim": 0.5, "psnr_cc": 21.0, "lane_iou": 10.0},
+            {"psnr": 22.0, "ssim": 0.7, "psnr_cc": 24.0, "lane_iou": 20.0}]
+    assert lateral_quality(rows) == pytest.approx({"psnr": 21.0, "ssim": 0.6, "psnr_cc": 22.5, "lane_iou": 15.0})
+    rows[1].pop("lane_iou")  # a package without lane masks
+    assert "lane_iou" not in lateral_quality(rows)
+    settings = [Setting("d", "0.5 m", True, lambda: {"seconds": 1.0, "psnr": 21.0, "psnr_cc": 22.5, "lane_iou": 3.44}),
                 Setting("aa", "off", True, lambda: {"seconds": 1.0, "psnr": 30.0})]
     table = format_table(run_settings(settings, progress=False)).splitlines()
-    assert "| lane IoU |" in table[0]
-    assert "| 3.4 |" in table[2] and "| 30.00 | nan |  |" in table[3]
+    assert "| PSNR-cc (dB) |" in table[0] and "| lane IoU |" in table[0]
+    assert "| 21.00 | 22.50 |" in table[2] and "| 3.4 |" in table[2] and "| 30.00 |  | nan |  |" in table[3]
 
 
 def test_spread_picks_inside_the_sequence():

@@ -16,11 +16,13 @@ def test_quick_demo_end_to_end(tmp_path, capsys):
     assert {"render", "restore", "harmonize", "finetune", "evaluate"} <= ran
     methods = {(r["offset_m"], r["method"]) for r in report["metrics"]["lateral"]}
     assert {(3.0, "raw_3dgs"), (3.0, "ar_d0.5"), (3.0, "geo_ar_d1.0"), (1.0, "single_view")} <= methods
+    assert all(r["psnr_cc"] >= r["psnr"] for r in report["metrics"]["lateral"])  # the colour fit, every row
     assert {r["method"] for r in report["metrics"]["insertion"]} == {
         "naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow"}
     assert len(list((out / "shadows").rglob("*.png"))) == 1  # the sunny street: the window's frame 12 has a car
     assert 25.0 < report["metrics"]["reconstruction"]["psnr_heldout"] < 60.0
     md = (out / "report.md").read_text()
+    assert "| PSNR | PSNR-cc | SSIM |" in md
     for fig in ("lateral.png", "lateral_psnr.png", "insertion.png", "trajectory.png"):
         assert f"figures/{fig}" in md and read_image(out / "figures" / fig).shape[0] > 100
     assert len(list((out / "trajectory").glob("*.png"))) == 30

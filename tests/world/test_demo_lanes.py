@@ -90,5 +90,6 @@ def test_lateral_rows_carry_lane_iou_and_its_ceiling():
 def test_rows_have_no_lane_iou_without_lane_masks():
     from symdrive_core.eval.views import lateral_rows
 
-    rows = lateral_rows({(1.0, "raw_3dgs"): [(25.0, 0.8), (27.0, 0.9)]}, {}, {})
-    assert rows == [{"offset_m": 1.0, "method": "raw_3dgs", "psnr": 26.0, "ssim": 0.85, "frames": 2}]
+    scores = [{"psnr": 25.0, "ssim": 0.8, "psnr_cc": 26.0}, {"psnr": 27.0, "ssim": 0.9, "psnr_cc": 29.0}]
+    rows = lateral_rows({(1.0, "raw_3dgs"): scores}, {}, {})
+    assert rows == [{"offset_m": 1.0, "method": "raw_3dgs", "psnr": 26.0, "ssim": 0.85, "psnr_cc": 27.5, "frames": 2}]
