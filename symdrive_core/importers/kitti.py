@@ -46,13 +46,14 @@ def _read_lines(path: Path, what: str) -> list[str]:
         raise InputError(path, f"not a text file: {exc}", what) from None
 
 
-def read_calib(path: Path) -> dict[str, np.ndarray]:
-    """Projection matrices by name (``P0``, ``P1``, ...), each 3x4, checked to be ``K [I | t]``."""
+def read_calib(path: Path) -> dict[str, str]:
+    """The text of each projection matrix by name (``P0``, ``P1``, ...); each is checked to be
+    ``K [I | t]`` where it is used, since converted files fill the cameras they lack with zeros."""
     out = {}
     for i, (label, rest) in enumerate(labelled_lines(_read_lines(path, "calib.txt"))):
         label = f"P{i}" if label is None else label
         if len(label) == 2 and label[0] == "P" and label[1].isdigit():
-            out[label] = projection(rest, path, label)  # Tr, R_rect and the like are not cameras
+            out[label] = rest  # Tr, R_rect and the like are not cameras
     return out
 
 
@@ -124,7 +125,7 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats:
         label = _projection_name(folder)
         if label not in calib:
             raise InputError(calib_path, f"no projection matrix for {folder}", label)
-        P = calib[label]
+        P = projection(calib[label], calib_path, label)
         offset = np.eye(4)
         offset[:3, 3] = camera_offset(P)
         frames = _frames(sequence / folder)

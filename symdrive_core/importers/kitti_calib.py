@@ -113,4 +113,4 @@ def velo_to_camera(path: Path, labels: dict[str, str], camera: int) -> tuple[np.
     T[:3, 3] -= offset
     composed = ", ".join(x for x in (velo_label, rect_label, p_label) if x)
     return T, (f"KITTI {layout} calibration ({composed}): the Velodyne into rectified camera {camera}, "
-               f"which sits at {np.round(offset, 4).tolist()} m from camera 0")
+               f"which sits at {(np.round(offset, 4) + 0.0).tolist()} m from camera 0")

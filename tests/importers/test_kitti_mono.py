@@ -208,6 +208,7 @@ def test_the_sequences_own_calib_txt_is_read_and_camera_0_would_miss(mono, tmp_p
     assert rc == 0 and landed(work, truth) == 1.0
     rc, work, printed = import_lidar(pkg, scans, calib, tmp_path / "b", capsys, "--kitti-camera", "0")
     assert rc == 0 and "rectified camera 0" in printed.out
+    print(f"composed to camera 0: {landed(work, truth):.1%} of the returns on their pixel")
     assert landed(work, truth) < 0.5
 
 
