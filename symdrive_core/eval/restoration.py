@@ -24,6 +24,7 @@ class LateralRestoration:
     rows: list[dict]
     views: dict[str, list[RestoredView]] = field(default_factory=dict)
     chains: dict[int, LateralChain] = field(default_factory=dict)  # by frame, their restorations cached
+    ground: dict | None = None  # the warp's ground planes and what each was fitted to (guided methods)
 
 
 
@@ -57,7 +58,7 @@ def run_lateral_restoration(
     scores: dict[tuple[float, str], list] = {}
     ceilings: dict[float, list[float]] = {}
     seconds: dict[str, list[float]] = {}
-    result = LateralRestoration(rows=[])
+    result = LateralRestoration(rows=[], ground=None if warper is None else warper.ground.summary())
     by_frame: dict[int, list] = {}
     for v in targets:
         by_frame.setdefault(v.frame, []).append(v)
@@ -121,7 +122,8 @@ def restoration_study(manifest: Manifest, gaussians: Gaussians, restorer, *, met
     result = run_lateral_restoration(manifest, gaussians, restorer, methods=methods, sampler=sampler, frames=frames,
                                      progress=progress)
     rows = evaluate_lateral(manifest, gaussians, "raw_3dgs", frames) + result.rows
-    metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows}
+    metrics = {"sampler": vars(sampler), "seconds": round(time.perf_counter() - t0, 1), "lateral": rows,
+               **({"ground": result.ground} if result.ground else {})}
     if refine is None:
         return metrics, None
     # As the pipeline does: the lateral views of every recorded frame (not only the scored ones),
