@@ -1,4 +1,5 @@
-"""``symdrive import colmap|nerfstudio|3dgs``: a reconstruction of a recorded drive -> a scene package;
+"""``symdrive import colmap|nerfstudio|3dgs|kitti``: a reconstruction or a KITTI drive -> a scene package
+(``kitti-raw``: with its LiDAR depth and tracked vehicles);
 ``symdrive import lidar``: its LiDAR scans -> the package's sparse depth; ``symdrive import tracks``:
 its vehicles' per-frame boxes -> the package's existing actors."""
 
@@ -9,11 +10,13 @@ import sys
 import time
 
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
+from ..importers.kitti_calib import CAMERAS as KITTI_CAMERAS
+from ..importers.kitti_raw import KittiRawConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
 from . import add_quiet_option, count_int, default_of, positive_int
 
 
-def _common(p, images: bool) -> None:
+def _common(p, images: bool, camera_name: bool = True) -> None:
     if images:
         p.add_argument("--images", help="folder of the recorded images (paths in the model are relative to it)")
     p.add_argument("--out", required=True, help="scene package folder to write (written whole, or not at all)")
@@ -28,8 +31,9 @@ def _common(p, images: bool) -> None:
                    help="hold every N-th frame out of training for evaluation (N=5: frames 2, 7, 12, ...)")
     p.add_argument("--copy-images", action="store_true",
                    help="copy the images into the package (default: reference them, relative to the package)")
-    p.add_argument("--camera-name", default=DEFAULT_CAMERA,
-                   help=f"name of the package camera when there is one ({DEFAULT_CAMERA})")
+    if camera_name:
+        p.add_argument("--camera-name", default=DEFAULT_CAMERA,
+                       help=f"name of the package camera when there is one ({DEFAULT_CAMERA})")
     p.add_argument("--fps", type=float, default=DEFAULT_FPS,
                    help=f"frame rate for timestamps when the source has none ({DEFAULT_FPS:g})")
     p.add_argument("--name", help="scene name (default: the package folder's name)")
@@ -65,6 +69,7 @@ def add_commands(sub) -> None:
     p.add_argument("--poses", help="the sequence's poses file, metres (default: SEQUENCE_DIR/poses.txt)")
     _common(p, images=False)
     p.set_defaults(func=_kitti)
+    _kitti_raw_command(isub)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
@@ -88,6 +93,33 @@ def add_commands(sub) -> None:
     add_quiet_option(p)
     p.set_defaults(func=_lidar)
     _tracks_command(isub)
+
+
+def _kitti_raw_command(isub) -> None:
+    p = isub.add_parser("kitti-raw", help="KITTI raw drive (DATE/DATE_drive_NNNN_sync with the date's calibration "
+                                          "beside it): its cameras, OXTS poses, Velodyne depth and tracklets")
+    p.add_argument("drive", metavar="DRIVE_DIR",
+                   help="the drive's _sync folder (image_0i/, oxts/, velodyne_points/, tracklet_labels.xml), "
+                        "its parent holding calib_cam_to_cam.txt, calib_velo_to_cam.txt, calib_imu_to_velo.txt")
+    p.add_argument("--cameras", type=_camera_list, metavar="I,...",
+                   help="KITTI cameras to import as package cameras image_0I (0, 1 grey; 2, 3 colour; default "
+                        f"{','.join(map(str, KittiRawConfig.cameras))})")
+    p.add_argument("--types", type=_type_list, metavar="TYPE,...",
+                   help=f"tracklet object types imported as vehicles (default {','.join(KittiRawConfig.types)})")
+    _common(p, images=False, camera_name=False)
+    _lateral_truth_option(p)
+    p.set_defaults(func=_kitti_raw)
+
+
+def _camera_list(text: str) -> tuple[int, ...]:
+    try:
+        cameras = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        cameras = ()
+    if not cameras or len(set(cameras)) != len(cameras) or not set(cameras) <= set(KITTI_CAMERAS):
+        raise argparse.ArgumentTypeError(f"expected distinct KITTI cameras among "
+                                         f"{','.join(map(str, KITTI_CAMERAS))} (2,3), got {text!r}")
+    return cameras
 
 
 def _tracks_command(isub) -> None:
@@ -175,15 +207,17 @@ def _triangulate(src, opt) -> None:
           f"reprojection error, {time.perf_counter() - t0:.1f} s)")
 
 
-def _finish(src, args, t0, copy_images: bool = False, options=None) -> int:
+def _finish(src, args, t0, copy_images: bool = False, options=None, extend=None, report=None) -> int:
     from ..importers.package import write_package
 
     opt = options or _options(args, copy_images)
     _triangulate(src, opt)
-    info = write_package(src, opt, progress=not args.quiet)
+    info = write_package(src, opt, progress=not args.quiet, extend=extend)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "
           f"({time.perf_counter() - t0:.1f} s)")
+    if report is not None:
+        report(info["extended"])
     if src.lateral is not None:
         print(f"lateral ground truth: camera {src.lateral.name}, {len(src.lateral.views)} images at "
               f"{info['lateral_offset_m']:+g} m of camera {src.lateral.camera} (not trained on)")
@@ -270,6 +304,42 @@ def _kitti(args) -> int:
     c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
     up = opt.up or tuple(path_up(c2ws).tolist())
     return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up))
+
+
+def _kitti_raw(args) -> int:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from ..importers.ground import path_up
+    from ..importers.kitti_raw import read_kitti_raw
+    from . import given
+
+    t0 = time.perf_counter()
+    opt = _options(args)
+    config = replace(KittiRawConfig(), **given(args, "cameras", "types"))
+    drive = read_kitti_raw(args.drive, config, splats=args.splats, fps=args.fps, progress=not args.quiet)
+    src = _with_lateral_truth(drive.source, args)
+    if src.points is None:
+        print("note: no velodyne_points/data: no LiDAR depth; the ground comes from points triangulated from the "
+              "images", flush=True)
+    # OXTS poses are metric. Without LiDAR points the ground's plane is the one the path rides on.
+    c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
+    up = opt.up or (None if src.points is not None else tuple(path_up(c2ws).tolist()))
+    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up), extend=drive.extend,
+                   report=_kitti_raw_report)
+
+
+def _kitti_raw_report(extended: dict) -> None:
+    """What a KITTI raw drive's LiDAR and tracklets added to the package."""
+    for info in extended["lidar"]:
+        print(f"LiDAR depth for camera {info['camera']} in {info['folder']}/: {info['points']} points, "
+              f"{100 * info['measured_fraction']:.1f}% of pixels measured")
+    tracks = extended["tracks"]
+    if tracks is not None:
+        skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
+        print(f"tracklets: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
+              f"({tracks['outside']} in frames not imported); types skipped: {skipped}")
 
 
 def _gs(args) -> int:

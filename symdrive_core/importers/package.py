@@ -81,10 +81,13 @@ def _check_images(g: Grouped, lateral: StereoTruth | None) -> None:
                 check_image(v.image, v.width, v.height, v.source, v.where)
 
 
-def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
+def write_package(src: Source, opt: Options, progress: bool = True, extend=None) -> dict:
     """Align ``src`` to a metric Z-up world and write it as a package at ``opt.out``; returns a
     summary (frames, cameras, transform, the ground fit's quality, whether the package reads files
-    outside itself). ``progress`` shows a bar over the images (copying thousands takes a while)."""
+    outside itself). ``progress`` shows a bar over the images (copying thousands takes a while).
+    ``extend(folder)``, when given, adds to the package written in ``folder`` (a drive's LiDAR depth
+    and tracked vehicles) before it is validated and renamed into place, so they land with the
+    package or not at all; what it returns is the summary's ``extended``."""
     from tqdm import tqdm
 
     from ..io.atomic import atomic_directory
@@ -168,9 +171,11 @@ def write_package(src: Source, opt: Options, progress: bool = True) -> dict:
             data["source"]["stereo"] = {"camera": src.lateral.name, "baseline_source_units": src.lateral.baseline}
         m = parse_manifest(data, tmp / "manifest.json", allow_external=external)
         m.save()
+        extended = None if extend is None else extend(tmp)
         m = load_manifest(tmp, allow_external=external)
         check_files(m)
     return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
             "lateral_offset_m": None if src.lateral is None else data["effects"]["lateral_offsets"][0],
             "scale": record["scale"], "camera_height_m": record["camera_height_m"],
-            "ground_fit": record["ground_fit"], "external_images": external, "transform": T}
+            "ground_fit": record["ground_fit"], "external_images": external, "transform": T,
+            "extended": extended}

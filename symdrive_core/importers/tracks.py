@@ -415,20 +415,28 @@ def _place(m, tracks: Tracks, new: list[tuple[Track, list, np.ndarray]], replace
 
 def import_tracks(package, tracks_file, *, fmt: str | None = None, camera: str | None = None,
                   calib=None, replace: bool = False, config: TracksConfig = TracksConfig()) -> dict:
-    """Add the tracks in ``tracks_file`` to the package as ``existing`` actors and save its manifest
-    (atomically, after the whole result has been checked as a manifest). ``calib``: a KITTI
-    calibration file whose ``P2`` moves boxes from camera 0's frame into camera 2's. ``replace``:
-    tracks may replace actors of kind ``existing`` with the same id. Returns a summary."""
+    """Add the tracks in ``tracks_file`` to the package as ``existing`` actors (see
+    :func:`add_tracks`). ``calib``: a KITTI calibration file whose ``P2`` moves boxes from camera
+    0's frame into camera 2's. Returns a summary."""
     from ..scene import load_manifest
 
     m = load_manifest(package)
     tracks = read_tracks(tracks_file, fmt, config)
     offset = None if calib is None else read_camera_offset(calib)
+    return add_tracks(m, tracks, camera=camera, offset=offset, replace=replace, frame_offset=config.frame_offset)
+
+
+def add_tracks(m, tracks: Tracks, *, camera: str | None = None, offset: np.ndarray | None = None,
+               replace: bool = False, frame_offset: int = 0) -> dict:
+    """Add ``tracks`` to the loaded package ``m`` as ``existing`` actors and save its manifest
+    (atomically, after the whole result has been checked as a manifest). ``offset``: where the
+    package camera sits in the frame of boxes given in camera coordinates (KITTI's camera 2 in
+    camera 0's). ``replace``: tracks may replace actors of kind ``existing`` with the same id."""
     to_world = _frame_to_world(m, tracks, camera, offset)
     nf = len(m.frames)
     new, outside, empty = [], 0, 0
     for track in tracks.tracks:
-        poses, wlh, out = _track_poses(track, tracks, to_world, nf, config.frame_offset)
+        poses, wlh, out = _track_poses(track, tracks, to_world, nf, frame_offset)
         outside += out
         if wlh is None:
             empty += 1

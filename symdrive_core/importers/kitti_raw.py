@@ -1,0 +1,303 @@
+"""A KITTI raw drive -> :class:`~.package.Source` of its cameras, with its LiDAR and tracked vehicles.
+
+KITTI ships a drive as ``DATE/DATE_drive_NNNN_sync/`` (rectified images ``image_0i/data/*.png``
+with ``image_0i/timestamps.txt``, ``oxts/data/*.txt``, ``velodyne_points/data/*.bin`` and, for
+labelled drives, ``tracklet_labels.xml``) and the date's calibration beside it in ``DATE/``:
+``calib_cam_to_cam.txt`` (``R_rect_00``, ``P_rect_0i``, ``S_rect_0i``), ``calib_velo_to_cam.txt``
+and ``calib_imu_to_velo.txt`` (``R``, ``T``). Frames are named by number in every folder, so an
+excerpt of a drive reads the same way.
+
+Every transform is composed to the camera the package holds, as the devkit and pykitti compose
+them (:mod:`.kitti_calib`): rectified camera ``i`` from the Velodyne is ``T_i R_rect_00
+T_velo_to_cam`` and from the IMU that times ``T_imu_to_velo``, where ``T_i`` moves rectified camera
+0's frame to camera ``i``'s (camera ``i`` sits at ``-K_i^-1 P_rect_0i[:, 3]`` in it: the colour
+cameras 6 cm left and 0.47 m right of camera 0). A camera's pose at a frame is the IMU's pose from
+OXTS (:mod:`.oxts`) times the inverse of that chain. KITTI puts pixel centres at integer
+coordinates; the package's K puts them at +0.5.
+
+The LiDAR enters two ways, from the same scans: each package camera's sparse depth (the scans
+projected by :func:`.lidar.import_lidar`, composed to that camera), and the returns the first
+camera sees, coloured from its images, as the source's points: a metric ground to fit under the
+camera path, and the points the reconstruction starts from. Tracklets become ``existing`` actors
+through the tracks writer (:func:`.tracks.add_tracks`). Depth and actors are added inside the
+package's temporary folder (:func:`.package.write_package`'s ``extend``), so a drive comes in whole
+or not at all; every input is read and checked before anything is written.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from .. import conventions
+from ..errors import InputError
+from .calib_text import finite_numbers, read_small_text
+from .frames import DEFAULT_FPS, View, group_views
+from .kitti_calib import RAW_CAM_TO_CAM, labels_of, layout_of, projection, velo_to_camera
+from .lidar import LidarConfig, list_scans, read_scan
+from .oxts import imu_poses, read_record
+from .package import Source
+from .tracklets import Tracklet, read_tracklets
+from .tracks import TracksConfig
+
+CALIB_VELO_TO_CAM = "calib_velo_to_cam.txt"
+CALIB_IMU_TO_VELO = "calib_imu_to_velo.txt"
+TRACKLETS = "tracklet_labels.xml"
+SCANS = Path("velodyne_points") / "data"
+
+
+@dataclass(frozen=True)
+class KittiRawConfig:
+    # KITTI cameras made package cameras (0, 1 grey; 2, 3 the colour pair); the first is the
+    # package's first camera (ground truth, tracked boxes).
+    cameras: tuple[int, ...] = (2, 3)
+    # Tracklet object types imported as vehicles.
+    types: tuple[str, ...] = TracksConfig.types
+    # LiDAR returns seen by the first camera kept as the source's points (spread evenly over the
+    # scans): enough for the ground fit and the reconstruction's start, which keeps 30k of them.
+    lidar_points: int = 100_000
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+
+
+def camera_name(i: int) -> str:
+    """A KITTI camera's package name: its folder's (``image_02``)."""
+    return f"image_{i:02d}"
+
+
+# ---------------------------------------------------------------- calibration
+
+
+def _labels(path: Path) -> dict[str, str]:
+    return labels_of(read_small_text(path, "calibration"))
+
+
+def _numbers(labels: dict[str, str], key: str, count: int, path: Path) -> np.ndarray:
+    if key not in labels:
+        raise InputError(path, f"no {key} line", key)
+    return finite_numbers(labels[key], count, path, key)
+
+
+def _imu_to_velo(path: Path) -> np.ndarray:
+    """The IMU -> Velodyne transform of ``calib_imu_to_velo.txt`` (``R``: 9 numbers, ``T``: 3)."""
+    labels = _labels(path)
+    T = np.eye(4)
+    T[:3, :3] = _numbers(labels, "R", 9, path).reshape(3, 3)
+    T[:3, 3] = _numbers(labels, "T", 3, path)
+    if not conventions.is_rigid(T):
+        raise InputError(path, "not a rotation (orthonormal, det +1)", "R")
+    return T
+
+
+@dataclass
+class Camera:
+    """One rectified KITTI camera: its package K, image size and where it sits on the rig."""
+
+    index: int
+    K: np.ndarray  # [3, 3], package pixel centres (+0.5)
+    width: int
+    height: int
+    velo_to_camera: np.ndarray  # [4, 4]
+    imu_to_camera: np.ndarray  # [4, 4]
+
+
+def read_calibration(date_dir: Path, cameras: tuple[int, ...]) -> dict[int, Camera]:
+    """The rig of ``cameras`` from the date folder's three calibration files."""
+    rect_path, velo_path = date_dir / RAW_CAM_TO_CAM, date_dir / CALIB_VELO_TO_CAM
+    rect, velo = _labels(rect_path), _labels(velo_path)
+    if layout_of(velo) != "raw":
+        raise InputError(velo_path, "no R and T lines (the Velodyne to camera 0 before rectification)", "R")
+    imu_to_velo = _imu_to_velo(date_dir / CALIB_IMU_TO_VELO)
+    out = {}
+    for i in cameras:
+        key = f"P_rect_{i:02d}"
+        if key not in rect:
+            raise InputError(rect_path, f"no {key} line (KITTI camera {i}'s projection)", key)
+        P = projection(rect[key], rect_path, key)
+        size = _numbers(rect, f"S_rect_{i:02d}", 2, rect_path)
+        if not np.all((size >= 1) & (size == np.round(size))):
+            raise InputError(rect_path, f"expected an image size in whole pixels, got {size.tolist()}",
+                             f"S_rect_{i:02d}")
+        velo_to_cam, _ = velo_to_camera(velo_path, velo, i)
+        K = conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5)
+        out[i] = Camera(i, K, int(size[0]), int(size[1]), velo_to_cam, velo_to_cam @ imu_to_velo)
+    return out
+
+
+# ---------------------------------------------------------------- frames, times
+
+
+def _frames(drive: Path, cameras: tuple[int, ...]) -> dict[int, dict[str, Path]]:
+    """Per camera, frame name -> image; every camera must hold the same frames."""
+    out: dict[int, dict[str, Path]] = {}
+    for i in cameras:
+        folder = drive / camera_name(i) / "data"
+        if not folder.is_dir():
+            raise InputError(folder, f"no images of KITTI camera {i}", "--cameras")
+        out[i] = {p.stem: p for p in folder.iterdir() if p.suffix.lower() == ".png" and p.stem.isdigit()}
+        if not out[i]:
+            raise InputError(folder, "no images named by frame number (0000000000.png, ...)", "images")
+    first = cameras[0]
+    for i in cameras[1:]:
+        missing = sorted(set(out[first]) ^ set(out[i]))
+        if missing:
+            has = camera_name(first) if missing[0] in out[first] else camera_name(i)
+            raise InputError(drive / has / "data" / f"{missing[0]}.png", "frame not recorded by every camera chosen "
+                             f"({', '.join(camera_name(c) for c in cameras)})", "--cameras")
+    return out
+
+
+def _clock(text: str, path: Path, where: str) -> tuple[int, float]:
+    """(whole seconds since 1970, the fraction) of a KITTI time ``YYYY-MM-DD HH:MM:SS.fffffffff``;
+    split so nanoseconds survive where a datetime keeps microseconds."""
+    whole, _, frac = text.strip().partition(".")
+    try:
+        t = datetime.strptime(whole, "%Y-%m-%d %H:%M:%S")
+        if frac and not frac.isdigit():
+            raise ValueError
+    except ValueError:
+        raise InputError(path, f"expected a time YYYY-MM-DD HH:MM:SS.fffffffff, got {text.strip()!r}", where) from None
+    return int((t - datetime(1970, 1, 1)).total_seconds()), float(f"0.{frac or 0}")
+
+
+def _times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
+    """(seconds since the first of ``names``, that frame's time as written) from a camera's
+    ``timestamps.txt`` (line n: frame n), or None when the camera has none."""
+    if not path.is_file():
+        return None
+    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    clocks = []
+    for name in names:
+        n = int(name)
+        if n >= len(lines) or not lines[n].strip():
+            raise InputError(path, f"no time for frame {name}; the file has {len(lines)} lines", f"line {n + 1}")
+        clocks.append(_clock(lines[n], path, f"line {n + 1}"))
+    s0, f0 = clocks[0]
+    times = [float(s - s0) + (f - f0) for s, f in clocks]
+    for name, a, b in zip(names[1:], times, times[1:]):
+        if b <= a:
+            raise InputError(path, f"frame {name}'s time is not after the frame before it", f"line {int(name) + 1}")
+    return times, lines[int(names[0])].strip()
+
+
+# ---------------------------------------------------------------- the drive
+
+
+@dataclass
+class KittiRawDrive:
+    """What was read: the source, and what :meth:`extend` adds to the written package."""
+
+    source: Source
+    cameras: dict[str, Camera]  # package camera name -> its calibration
+    calibration: Path  # calib_velo_to_cam.txt, which LiDAR depth composes to each camera
+    scans: Path | None  # the Velodyne folder, one scan per frame in frame order
+    tracklets: list[Tracklet] | None
+    tracklets_path: Path
+    config: KittiRawConfig
+    progress: bool = True
+
+    def extend(self, folder: Path) -> dict:
+        """Each package camera's sparse depth and the tracklets as actors, in the package being
+        written at ``folder``; a summary for the command's report."""
+        from ..scene import load_manifest
+        from .lidar import import_lidar
+        from .tracklets import tracklet_tracks
+        from .tracks import add_tracks
+
+        lidar = []
+        if self.scans is not None:
+            for cam in load_manifest(folder).cameras:
+                lidar.append(import_lidar(folder, self.scans, self.calibration, camera=cam.name,
+                                          kitti_camera=self.cameras[cam.name].index, config=self.config.lidar,
+                                          progress=self.progress))
+        tracks = None
+        if self.tracklets is not None:
+            m = load_manifest(folder)
+            first = m.cameras[0].name
+            frames = {int(name): fi for fi, name in enumerate(m.source["frame_names"])}
+            found, outside = tracklet_tracks(self.tracklets, self.tracklets_path, self.cameras[first].velo_to_camera,
+                                             frames, self.config.types)
+            tracks = {**add_tracks(m, found, camera=first), "outside": outside}
+        return {"lidar": lidar, "tracks": tracks}
+
+
+def _lidar_points(scans: list[Path], world_from_velo: np.ndarray, cam: Camera, images: list[Path],
+                  config: KittiRawConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(points [N, 3] in the source frame, colours [N, 3]): per scan an even share of
+    ``config.lidar_points`` of the returns that land in the camera's image, coloured there."""
+    from ..io.images import read_image
+
+    rng = np.random.default_rng(0)
+    share = -(-config.lidar_points // len(scans))
+    points, colors = [], []
+    for scan, image, w_velo in zip(scans, images, world_from_velo):
+        p = read_scan(scan)
+        uv, z = conventions.project_points(p, cam.velo_to_camera, cam.K)
+        with np.errstate(invalid="ignore"):
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            seen = (z >= config.lidar.min_depth_m) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
+        keep = np.flatnonzero(seen)
+        if len(keep) > share:
+            keep = np.sort(rng.choice(keep, share, replace=False))
+        rgb = read_image(image, channels=3)
+        colors.append(rgb[row[keep].astype(np.int64), col[keep].astype(np.int64)])
+        points.append(p[keep] @ w_velo[:3, :3].T + w_velo[:3, 3])
+    return np.concatenate(points), np.concatenate(colors).astype(np.float64)
+
+
+def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(), *, splats=None,
+                   fps: float = DEFAULT_FPS, progress: bool = True) -> KittiRawDrive:
+    """Read and check a whole drive (``config.cameras``, OXTS, timestamps, the Velodyne's scans
+    when present, ``tracklet_labels.xml`` when present). A splat PLY (``splats``) is taken to be in
+    the source frame: East-North-Up metres about the first frame's OXTS position."""
+    drive = Path(drive)
+    if not drive.is_dir():
+        raise InputError(drive, "not a folder (expected a KITTI raw drive, DATE/DATE_drive_NNNN_sync)", "DRIVE_DIR")
+    cameras = tuple(config.cameras)
+    rig = read_calibration(drive.resolve().parent, cameras)
+    images = _frames(drive, cameras)
+    names = sorted(images[cameras[0]], key=int)
+    oxts = [drive / "oxts" / "data" / f"{name}.txt" for name in names]
+    world_from_imu, projection = imu_poses(np.stack([read_record(p) for p in oxts]))
+    views, time_origin = [], None
+    for i in cameras:
+        cam, folder = rig[i], camera_name(i)
+        times = _times(drive / folder / "timestamps.txt", names)
+        if times is not None and time_origin is None:
+            time_origin = times[1]
+        cam_from_imu_inv = conventions.invert_rigid(cam.imu_to_camera)
+        for fi, name in enumerate(names):
+            # {camera}/{frame} for a rig, the frame alone for one camera: the package's frame
+            # names are the drive's frame numbers either way (what extend maps tracklets by).
+            views.append(View(name=f"{folder}/{name}" if len(cameras) > 1 else name, K=cam.K, width=cam.width,
+                              height=cam.height, c2w=world_from_imu[fi] @ cam_from_imu_inv, source=oxts[fi],
+                              where=f"line 1 ({folder}/data/{name}.png)", image=images[i][name],
+                              timestamp=None if times is None else times[0][fi]))
+    grouped = group_views(views, camera_name=camera_name(cameras[0]), fps=fps)
+    first = rig[cameras[0]]
+    scans_dir, points, colors = drive / SCANS, None, None
+    if scans_dir.is_dir():
+        scans = list_scans(scans_dir)
+        if [p.stem for p in scans] != names:
+            missing = sorted(set(names) ^ {p.stem for p in scans}, key=int)
+            raise InputError(scans_dir, f"{len(scans)} scans for {len(names)} frames of {camera_name(cameras[0])}"
+                             f"/data (frame {missing[0] if missing else '?'}): expected one scan per image, named "
+                             "as it", "velodyne_points")
+        world_from_velo = world_from_imu @ conventions.invert_rigid(first.imu_to_camera) @ first.velo_to_camera
+        points, colors = _lidar_points(scans, world_from_velo, first, [images[cameras[0]][n] for n in names], config)
+    tracklets_path = drive / TRACKLETS
+    tracklets = read_tracklets(tracklets_path) if tracklets_path.is_file() else None
+    g = None
+    if splats is not None:
+        from ..io.ply import read_splats
+
+        g = read_splats(splats)
+    notes = {"drive": drive.name, "oxts": projection, "time_origin": time_origin,
+             "kitti_cameras": {camera_name(i): {"imu_to_camera": rig[i].imu_to_camera.tolist()} for i in cameras}}
+    src = Source("kitti-raw", drive, grouped, splats=g, splats_path=None if splats is None else Path(splats),
+                 points=points, colors=colors, notes=notes)
+    return KittiRawDrive(src, {camera_name(i): rig[i] for i in cameras}, drive.resolve().parent / CALIB_VELO_TO_CAM,
+                         scans_dir if points is not None else None,
+                         tracklets, tracklets_path, config, progress)

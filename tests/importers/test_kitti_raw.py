@@ -1,0 +1,363 @@
+"""KITTI raw drives in (``symdrive import kitti-raw``): a drive written in KITTI's raw layout from
+known IMU poses (as OXTS latitude, longitude, altitude and angles through the devkit's formulas
+inverted), a known rig calibration, LiDAR returns at known world points and a tracklet of a known
+moving box comes back within float64 round-off; pykitti reads the same files to the same poses
+and calibration; bad input exits 2 naming the file and the field and writes nothing."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from symdrive_core.cli import main
+from symdrive_core.conventions import invert_rigid
+from symdrive_core.importers.kitti_raw import KittiRawConfig, read_kitti_raw
+from symdrive_core.importers.oxts import EARTH_RADIUS_M, euler_rotation
+from symdrive_core.io.images import read_image, write_image
+from symdrive_core.scene import load_manifest
+
+DATE, DRIVE = "2011_09_26", "0005"
+N_FRAMES, WIDTH, HEIGHT = 8, 64, 32
+FX, CX, CY = 30.0, 31.5, 15.5  # KITTI's pixel centres at integers
+LAT0, LON0, ALT0 = 49.011, 8.4229, 112.9
+GROUND_Z = -0.93  # the road below the IMU in the source frame (East-North-Up, origin the first fix)
+OFFSETS = {0: 0.0, 1: -0.54, 2: 0.06, 3: -0.47}  # P_rect_0i = K [I | (t, 0, 0)]
+CAR_WLH = (1.8, 4.2, 1.5)
+TOL_M = 1e-7  # round-off of Mercator coordinates near 5.4e6 m (measured: 4e-9 m)
+
+
+def rot(rx, ry, rz):
+    return euler_rotation(rx, ry, rz)
+
+
+def rigid(R, t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+# The rig: IMU -> Velodyne, Velodyne -> unrectified camera 0, the rectifying rotation.
+IMU_TO_VELO = rigid(rot(0.002, -0.011, 0.005), [-0.8087, 0.3196, -0.7997])
+VELO_TO_CAM = rigid(np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]) @ rot(0.004, -0.007, 0.013),
+                    [-0.0041, -0.0763, -0.2718])
+R_RECT = rot(0.006, -0.003, 0.0021)
+
+
+def camera_from_velo(i: int) -> np.ndarray:
+    return rigid(np.eye(3), [OFFSETS[i], 0.0, 0.0]) @ rigid(R_RECT, np.zeros(3)) @ VELO_TO_CAM
+
+
+def world_from_imu(k: int) -> np.ndarray:
+    """The known trajectory: a gentle left bend on a level road, with some roll and pitch."""
+    return rigid(rot(0.004 * k, 0.01 * (-1) ** k, 0.05 * k), [1.5 * k, 0.1 * k * k, 0.0])
+
+
+def world_from_camera(i: int, k: int) -> np.ndarray:
+    return world_from_imu(k) @ invert_rigid(camera_from_velo(i) @ IMU_TO_VELO)
+
+
+def world_from_velo(k: int) -> np.ndarray:
+    return world_from_imu(k) @ invert_rigid(IMU_TO_VELO)
+
+
+def car_box(k: int) -> np.ndarray:
+    """The tracked car's box (3DRealCar axes, origin at its centre) in the source frame."""
+    return rigid(rot(0.0, 0.0, 0.1 + 0.02 * k), [9.0 + 1.2 * k, 3.0, GROUND_Z + CAR_WLH[2] / 2])
+
+
+def world_points() -> np.ndarray:
+    """The road ahead and beside the path, and a wall that hides part of it."""
+    x, y = np.meshgrid(np.arange(-2.0, 30.0, 0.45), np.arange(-8.0, 8.0, 0.55))
+    road = np.stack([x.ravel(), y.ravel(), np.full(x.size, GROUND_Z)], 1)
+    wy, wz = np.meshgrid(np.arange(-4.0, 0.0, 0.3), np.arange(0.0, 2.0, 0.25))
+    wall = np.stack([np.full(wy.size, 16.0), wy.ravel(), GROUND_Z + wz.ravel()], 1)
+    return np.concatenate([road, wall])
+
+
+# ---------------------------------------------------------------- writing a drive
+
+
+def mercator(lat, lon, alt, scale):
+    return np.array([scale * lon * np.pi * EARTH_RADIUS_M / 180.0,
+                     scale * EARTH_RADIUS_M * np.log(np.tan((90.0 + lat) * np.pi / 360.0)), alt])
+
+
+def oxts_line(k: int) -> str:
+    """The devkit's formulas inverted: the fix and angles that give ``world_from_imu(k)``."""
+    scale = np.cos(LAT0 * np.pi / 180.0)
+    t = mercator(LAT0, LON0, ALT0, scale) + world_from_imu(k)[:3, 3]
+    lon = t[0] * 180.0 / (scale * np.pi * EARTH_RADIUS_M)
+    lat = np.arctan(np.exp(t[1] / (scale * EARTH_RADIUS_M))) * 360.0 / np.pi - 90.0
+    R = world_from_imu(k)[:3, :3]
+    yaw, pitch, roll = np.arctan2(R[1, 0], R[0, 0]), -np.arcsin(R[2, 0]), np.arctan2(R[2, 1], R[2, 2])
+    rest = [0.1] * 17 + [0.5, 0.05] + [4, 11, 5, 5, 5]
+    return " ".join(repr(float(v)) for v in [lat, lon, t[2], roll, pitch, yaw]) + " " + " ".join(map(str, rest))
+
+
+def numbers(values) -> str:
+    return " ".join(f"{float(v)!r}" for v in np.ravel(values))
+
+
+def write_calibration(date_dir) -> None:
+    K = np.array([[FX, 0.0, CX], [0.0, FX, CY], [0.0, 0.0, 1.0]])
+    lines = ["calib_time: 09-Jan-2012 13:57:47", "corner_dist: 9.950000e-02"]
+    for i, tx in OFFSETS.items():
+        P = K @ np.hstack([np.eye(3), [[tx], [0.0], [0.0]]])
+        lines += [f"S_{i:02d}: 1.392000e+03 5.120000e+02", f"K_{i:02d}: {numbers(K)}", f"D_{i:02d}: 0 0 0 0 0",
+                  f"R_{i:02d}: {numbers(np.eye(3))}", f"T_{i:02d}: 0 0 0", f"S_rect_{i:02d}: {WIDTH} {HEIGHT}",
+                  f"R_rect_{i:02d}: {numbers(R_RECT)}", f"P_rect_{i:02d}: {numbers(P)}"]
+    (date_dir / "calib_cam_to_cam.txt").write_text("\n".join(lines) + "\n")
+    for name, T in (("calib_velo_to_cam.txt", VELO_TO_CAM), ("calib_imu_to_velo.txt", IMU_TO_VELO)):
+        extra = "delta_f: 0 0\ndelta_c: 0 0\n" if name == "calib_velo_to_cam.txt" else ""
+        (date_dir / name).write_text(f"calib_time: 15-Mar-2012 11:37:16\nR: {numbers(T[:3, :3])}\n"
+                                     f"T: {numbers(T[:3, 3])}\n{extra}")
+
+
+def times(k: int) -> str:
+    ns = 964389445 + 103_651_234 * k
+    return f"2011-09-26 13:02:{25 + ns // 10**9:02d}.{ns % 10**9:09d}"
+
+
+def tracklet_pose(k: int) -> str:
+    """The car's box at frame k as the tracklet writes it: bottom centre and ZYX angles, Velodyne frame."""
+    M = invert_rigid(world_from_velo(k)) @ car_box(k)
+    R = M[:3, :3]
+    bottom = M[:3, 3] - R @ [0.0, 0.0, CAR_WLH[2] / 2]
+    angles = np.arctan2(R[2, 1], R[2, 2]), -np.arcsin(R[2, 0]), np.arctan2(R[1, 0], R[0, 0])
+    fields = dict(zip(("tx", "ty", "tz", "rx", "ry", "rz"), (*bottom, *angles)))
+    flags = "<state>1</state><occlusion>0</occlusion><occlusion_kf>0</occlusion_kf><truncation>0</truncation>"
+    return ('<item class_id="3" tracking_level="0" version="2">' + "".join(f"<{k}>{v!r}</{k}>" for k, v in
+            ((key, float(value)) for key, value in fields.items())) + flags + "</item>")
+
+
+def tracklet(kind: str, wlh, first: int, poses: list[str]) -> str:
+    w, l, h = wlh
+    return (f'<item class_id="1" tracking_level="0" version="1"><objectType>{kind}</objectType><h>{h}</h><w>{w}</w>'
+            f"<l>{l}</l><first_frame>{first}</first_frame><poses class_id=\"2\" tracking_level=\"0\" version=\"0\">"
+            f"<count>{len(poses)}</count><item_version>2</item_version>{''.join(poses)}</poses>"
+            "<finished>1</finished></item>")
+
+
+def write_tracklets(path, items: list[str]) -> None:
+    path.write_text('<?xml version="1.0" encoding="UTF-8" standalone="yes" ?>\n<!DOCTYPE boost_serialization>\n'
+                    '<boost_serialization signature="serialization::archive" version="9">\n'
+                    f'<tracklets class_id="0" tracking_level="0" version="0"><count>{len(items)}</count>'
+                    f"<item_version>1</item_version>{''.join(items)}</tracklets></boost_serialization>\n")
+
+
+def write_drive(root):
+    """``root/DATE/DATE_drive_NNNN_sync`` as KITTI ships it; returns the drive folder."""
+    date_dir = root / DATE
+    drive = date_dir / f"{DATE}_drive_{DRIVE}_sync"
+    rng = np.random.default_rng(3)
+    for sub in ("image_02/data", "image_03/data", "oxts/data", "velodyne_points/data"):
+        (drive / sub).mkdir(parents=True)
+    write_calibration(date_dir)
+    pts = world_points()
+    for k in range(N_FRAMES):
+        name = f"{k:010d}"
+        for i in (2, 3):
+            write_image(drive / f"image_{i:02d}" / "data" / f"{name}.png",
+                        rng.integers(0, 256, (HEIGHT, WIDTH, 3)).astype(np.float32) / 255.0)
+        (drive / "oxts" / "data" / f"{name}.txt").write_text(oxts_line(k) + "\n")
+        velo = pts @ invert_rigid(world_from_velo(k))[:3, :3].T + invert_rigid(world_from_velo(k))[:3, 3]
+        np.hstack([velo, np.full((len(velo), 1), 0.3)]).astype("<f4").tofile(
+            drive / "velodyne_points" / "data" / f"{name}.bin")
+    for sub in ("image_02", "image_03", "oxts", "velodyne_points"):
+        (drive / sub / "timestamps.txt").write_text("".join(times(k) + "\n" for k in range(N_FRAMES)))
+    write_tracklets(drive / "tracklet_labels.xml",
+                    [tracklet("Car", CAR_WLH, 1, [tracklet_pose(k) for k in range(1, N_FRAMES)]),
+                     tracklet("Pedestrian", (0.6, 0.8, 1.7), 0, [tracklet_pose(0)])])
+    return drive
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    return write_drive(tmp_path_factory.mktemp("kitti_raw"))
+
+
+@pytest.fixture(scope="module")
+def package(drive, tmp_path_factory):
+    out = tmp_path_factory.mktemp("pkg") / "pkg"
+    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--copy-images", "--quiet"]) == 0
+    return load_manifest(out)
+
+
+# ---------------------------------------------------------------- round trip
+
+
+def test_poses_come_back_in_the_source_frame(package):
+    T = np.asarray(package.source["transform"])
+    assert [c.name for c in package.cameras] == ["image_02", "image_03"]
+    for cam, i in zip(package.cameras, (2, 3)):
+        for k, cf in enumerate(cam.frames):
+            back = invert_rigid(T) @ cf.camera_to_world
+            assert np.abs(back - world_from_camera(i, k)).max() < TOL_M, (cam.name, k)
+            assert np.allclose(cf.K, [[FX, 0, CX + 0.5], [0, FX, CY + 0.5], [0, 0, 1]], rtol=0, atol=1e-12)
+    assert package.source["frame_names"] == [f"{k:010d}" for k in range(N_FRAMES)]
+    expected = [(964389445 + 103_651_234 * k) / 1e9 - 0.964389445 for k in range(N_FRAMES)]
+    assert np.allclose([f.timestamp for f in package.frames], expected, rtol=0, atol=1e-9)
+
+
+def test_the_ground_is_the_lidar_road_and_the_world_metric(package):
+    """The LiDAR's road becomes z = 0 of a metric world, to within what the fit's other term, the
+    camera path's constant height, pulls it by (the rig's roll and pitch move the cameras by 1 cm)."""
+    T = np.asarray(package.source["transform"])
+    assert package.source["scale"] == 1.0
+    road = world_points()[:-112] @ T[:3, :3].T + T[:3, 3]  # the wall's 112 points left out
+    assert np.abs(road[:, 2]).max() < 0.02
+    assert package.source["ground_fit"]["weak"] == []
+
+
+def expected_depth(i: int, k: int, scan: np.ndarray) -> np.ndarray:
+    p = scan @ camera_from_velo(i)[:3, :3].T + camera_from_velo(i)[:3, 3]
+    p = p[p[:, 2] >= 0.5]
+    col = np.floor(FX * p[:, 0] / p[:, 2] + CX + 0.5).astype(int)
+    row = np.floor(FX * p[:, 1] / p[:, 2] + CY + 0.5).astype(int)
+    depth = np.zeros((HEIGHT, WIDTH))
+    for c, r, z in zip(col, row, p[:, 2]):
+        if 0 <= c < WIDTH and 0 <= r < HEIGHT and (depth[r, c] == 0 or z < depth[r, c]):
+            depth[r, c] = z
+    return depth
+
+
+def test_every_camera_gets_the_scans_as_sparse_depth(drive, package):
+    measured = 0
+    for cam, i in zip(package.cameras, (2, 3)):
+        assert cam.depth_zero == "unmeasured"
+        for k, cf in enumerate(cam.frames):
+            scan = np.fromfile(drive / "velodyne_points" / "data" / f"{k:010d}.bin", "<f4").reshape(-1, 4)[:, :3]
+            want = expected_depth(i, k, scan.astype(np.float64))
+            got = read_image(package.resolve(cf.depth))[:, :, 0]
+            assert np.array_equal(got > 0, want > 0), (cam.name, k)
+            assert np.allclose(got, want, rtol=1e-7, atol=0), (cam.name, k)
+            measured += int((want > 0).sum())
+    assert measured > 500
+
+
+def test_the_lidar_points_are_the_first_cameras_returns_coloured_there(drive):
+    d = read_kitti_raw(drive, replace(KittiRawConfig(), lidar_points=10**6))  # every return kept
+    T = invert_rigid(world_from_camera(2, 0))
+    world = world_points()
+    cam = world @ T[:3, :3].T + T[:3, 3]
+    col = np.floor(FX * cam[:, 0] / cam[:, 2] + CX + 0.5)
+    row = np.floor(FX * cam[:, 1] / cam[:, 2] + CY + 0.5)
+    seen = (cam[:, 2] >= 0.5) & (col >= 0) & (col < WIDTH) & (row >= 0) & (row < HEIGHT)
+    n = int(seen.sum())
+    assert n > 200
+    # the first scan's returns come first, in the scan's order; the scan holds float32 coordinates
+    assert np.abs(d.source.points[:n] - world[seen]).max() < 1e-5
+    image = read_image(drive / "image_02" / "data" / "0000000000.png", channels=3)
+    assert np.array_equal(d.source.colors[:n], image[row[seen].astype(int), col[seen].astype(int)])
+    assert len(read_kitti_raw(drive).source.points) <= KittiRawConfig().lidar_points
+
+
+def test_the_tracklet_comes_back_as_an_existing_actor(package, capsys):
+    T = np.asarray(package.source["transform"])
+    (car,) = package.actors
+    assert car.id == "tracklet_0" and car.kind == "existing" and car.splats is None
+    assert np.allclose(car.wlh, CAR_WLH, rtol=0, atol=1e-12)
+    assert car.poses[0] is None
+    for k in range(1, N_FRAMES):
+        back = invert_rigid(T) @ car.poses[k].matrix()
+        assert np.abs(back - car_box(k)).max() < TOL_M, k
+
+
+def test_pykitti_reads_the_same_poses_and_calibration(drive):
+    pykitti = pytest.importorskip("pykitti")
+    data = pykitti.raw(str(drive.parent.parent), DATE, DRIVE)
+    d = read_kitti_raw(drive)
+    cams = d.cameras
+    assert np.allclose(cams["image_02"].K - [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]], data.calib.K_cam2, rtol=0,
+                       atol=1e-12)
+    assert np.allclose(cams["image_02"].velo_to_camera, data.calib.T_cam2_velo, rtol=0, atol=1e-12)
+    assert np.allclose(cams["image_03"].velo_to_camera, data.calib.T_cam3_velo, rtol=0, atol=1e-12)
+    assert np.allclose(cams["image_02"].imu_to_camera, data.calib.T_cam2_imu, rtol=0, atol=1e-12)
+    for k, (cam2, cam3) in enumerate(zip(*d.source.grouped.table)):
+        assert np.allclose(cam2.c2w, data.oxts[k].T_w_imu @ invert_rigid(data.calib.T_cam2_imu), rtol=0, atol=1e-9)
+        assert np.allclose(cam3.c2w, data.oxts[k].T_w_imu @ invert_rigid(data.calib.T_cam3_imu), rtol=0, atol=1e-9)
+
+
+def test_the_right_camera_as_lateral_truth(drive, tmp_path, capsys):
+    out = tmp_path / "pkg"
+    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--lateral-truth", "image_03",
+                 "--quiet"]) == 0
+    m = load_manifest(out)
+    assert [c.name for c in m.cameras] == ["image_02"]
+    assert m.effects.lateral_offsets == [round(OFFSETS[2] - OFFSETS[3], 4)]
+    assert len(m.actors) == 1 and m.cameras[0].frames[0].depth is not None
+    assert "image_03" in capsys.readouterr().out
+
+
+def test_one_camera(drive, tmp_path):
+    out = tmp_path / "pkg"
+    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--cameras", "3", "--quiet"]) == 0
+    m = load_manifest(out)
+    assert [c.name for c in m.cameras] == ["image_03"] and len(m.frames) == N_FRAMES
+    T = np.asarray(m.source["transform"])
+    assert np.abs(invert_rigid(T) @ m.cameras[0].frames[4].camera_to_world - world_from_camera(3, 4)).max() < TOL_M
+    assert main(["validate", str(out), "--allow-external-assets"]) == 0
+
+
+# ---------------------------------------------------------------- bad input
+
+
+def refused(drive, tmp_path, capsys, *needles):
+    out = tmp_path / "out" / "pkg"
+    rc = main(["import", "kitti-raw", str(drive), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert len(err.splitlines()) == 1, err
+    for n in needles:
+        assert n in err, (n, err)
+    assert not out.exists() and not (out.parent.exists() and any(out.parent.iterdir()))
+
+
+@pytest.fixture
+def bad(tmp_path):
+    return write_drive(tmp_path / "drive")
+
+
+def test_missing_oxts_file(bad, tmp_path, capsys):
+    (bad / "oxts" / "data" / "0000000003.txt").unlink()
+    refused(bad, tmp_path, capsys, "0000000003.txt", "oxts", "not found")
+
+
+def test_missing_oxts_line(bad, tmp_path, capsys):
+    (bad / "oxts" / "data" / "0000000003.txt").write_text("\n")
+    refused(bad, tmp_path, capsys, "0000000003.txt", "line 1", "expected one line")
+
+
+def test_oxts_line_with_the_wrong_field_count(bad, tmp_path, capsys):
+    path = bad / "oxts" / "data" / "0000000005.txt"
+    path.write_text(" ".join(path.read_text().split()[:29]) + "\n")
+    refused(bad, tmp_path, capsys, "0000000005.txt", "line 1", "expected 30", "got 29")
+
+
+@pytest.mark.parametrize("file,key", [("calib_cam_to_cam.txt", "P_rect_02"), ("calib_cam_to_cam.txt", "R_rect_00"),
+                                      ("calib_imu_to_velo.txt", "R"), ("calib_velo_to_cam.txt", "T")])
+def test_calibration_with_the_wrong_field_count(bad, tmp_path, capsys, file, key):
+    path = bad.parent / file
+    lines = [f"{line} 1.0" if line.startswith(f"{key}:") else line for line in path.read_text().splitlines()]
+    path.write_text("\n".join(lines) + "\n")
+    refused(bad, tmp_path, capsys, file, f": {key}: ", "finite numbers, got")
+
+
+def test_scan_count_not_the_image_count(bad, tmp_path, capsys):
+    (bad / "velodyne_points" / "data" / "0000000006.bin").unlink()
+    refused(bad, tmp_path, capsys, "velodyne_points", "7 scans for 8 frames", "0000000006")
+
+
+def test_tracklet_with_no_poses(bad, tmp_path, capsys):
+    write_tracklets(bad / "tracklet_labels.xml", [tracklet("Car", CAR_WLH, 1, [tracklet_pose(1)]),
+                                                  tracklet("Van", CAR_WLH, 0, [])])
+    refused(bad, tmp_path, capsys, "tracklet_labels.xml", "tracklets.item[1].poses", "no poses")
+
+
+def test_camera_without_images(bad, tmp_path, capsys):
+    rc = main(["import", "kitti-raw", str(bad), "--out", str(tmp_path / "pkg"), "--cameras", "2,1", "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "image_01" in err and "--cameras" in err, err
+    assert not (tmp_path / "pkg").exists()
