@@ -3,11 +3,26 @@ to a scene package's training drive."""
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import replace
 from pathlib import Path
 
 from ..optim.config import ReconstructConfig
-from . import add_quiet_option, count_int, default_of, given, positive_int
+from . import add_quiet_option, count_int, default_of, given, positive_int, unit_fraction
+
+
+def resolution_schedule_arg(text: str) -> tuple[float, ...]:
+    """``--resolution-schedule``: increasing fractions of the iterations, comma-separated; ``full``
+    (or nothing) trains at full resolution throughout."""
+    if text.strip().lower() in ("", "full"):
+        return ()
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated fractions of the iterations, got {text!r}") from None
+    if not all(0.0 < v <= 1.0 for v in values) or list(values) != sorted(set(values)):
+        raise argparse.ArgumentTypeError(f"expected increasing fractions in (0, 1], got {text!r}")
+    return values
 
 
 def add_commands(sub) -> None:
@@ -20,11 +35,21 @@ def add_commands(sub) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint if present")
     p.add_argument("--sh-degree", type=count_int,
                    help=f"SH degree of the result (default {default_of(ReconstructConfig, 'sh_degree')})")
+    p.add_argument("--sh-every", type=positive_int, help="raise the trained SH degree every N iterations "
+                   f"(default {default_of(ReconstructConfig, 'sh_every')})")
+    p.add_argument("--resolution-schedule", type=resolution_schedule_arg, metavar="F,...",
+                   help="coarse to fine: the fractions of the iterations at which the training images' downscale "
+                        "halves, e.g. 0.1,0.3 trains at 1/4 resolution until 10 %%, 1/2 until 30 %%, full after; "
+                        "'full': full resolution throughout (default "
+                        f"{','.join(map(str, ReconstructConfig().resolution_schedule)) or 'full'})")
     p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
                    f"0 = off (default {default_of(ReconstructConfig, 'sensor_depth_weight')} where the depth is LiDAR's, "
                    "sparse, as `import lidar` writes it; else 0)")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
+    p.add_argument("--densify-until", type=unit_fraction, metavar="F",
+                   help="stop densifying at this fraction of the iterations "
+                        f"(default {default_of(ReconstructConfig, 'densify_until_fraction')})")
     p.add_argument("--max-init-points", type=positive_int, help="point-cloud subset to start from "
                    f"(default {default_of(ReconstructConfig, 'max_init_points')})")
     p.add_argument("--seed", type=int,
@@ -48,7 +73,8 @@ def _reconstruct(args) -> int:
     from ..scene import ManifestError, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
-    cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "depth_weight", "max_init_points", "seed"))
+    cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
+                                    "max_init_points", "seed", densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     if args.static:
         cfg.decompose = False

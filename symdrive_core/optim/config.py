@@ -20,6 +20,10 @@ class DensifyConfig:
 @dataclass
 class ReconstructConfig:
     iters: int = 3000
+    # Coarse to fine: fractions of ``iters`` at each of which the training images' downscale
+    # halves, e.g. (0.1, 0.3): 4x until 10 %, 2x until 30 %, full resolution after; () = full
+    # resolution throughout. Early iterations place and colour Gaussians, which needs no fine detail.
+    resolution_schedule: tuple[float, ...] = ()
     sh_degree: int = 1
     sh_every: int = 1000  # raise the active SH degree every this many iterations
     lr_means: float = 1.6e-4  # times the scene extent; decays exponentially to lr_means_final
@@ -49,6 +53,14 @@ class ReconstructConfig:
     decompose: bool = True
     actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
     actor_max_gaussians: int = 40_000
+
+    def downscale_at(self, it: int) -> int:
+        """The factor the training images are downscaled by at iteration ``it`` (a power of 2)."""
+        return 2 ** sum(it < round(f * self.iters) for f in self.resolution_schedule)
+
+    def sh_degree_at(self, it: int) -> int:
+        """The SH degree trained at iteration ``it``: one more every ``sh_every``, up to ``sh_degree``."""
+        return min(self.sh_degree, it // self.sh_every)
 
     def depth_weight_for(self, camera) -> float:
         """The depth loss's weight for training on ``camera`` (a scene camera)."""

@@ -5,7 +5,8 @@ cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can 
 trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the package's depth
 maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
 with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
-step by step, clone/split/prune density control. Every k-th frame of the
+step by step, clone/split/prune density control, and optionally images coarse to fine
+(``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every k-th frame of the
 drive is held out for evaluation. Checkpoints are a splat PLY plus the optimizer state in
 safetensors, so ``--resume`` continues exactly where a run stopped.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -23,54 +25,19 @@ import torch
 from ..errors import InputError
 from ..gaussians import Gaussians, rgb_to_sh_dc
 from ..io.atomic import atomic_path, write_text_atomic
-from ..io.images import read_image
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
-from ..scene.camera import CameraView
-from ..scene.depth import is_sky, measured, read_depth
+from ..scene.depth import is_sky, measured
 from ..scene.ground_truth import split_frames
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
 from . import decompose
 from .config import DensifyConfig, ReconstructConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .losses import photometric
+from .views import Levels, View, load_views
 
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
-
-
-@dataclass
-class View:
-    frame: int
-    K: torch.Tensor  # [3,3] float32
-    viewmat: torch.Tensor  # [4,4] world-to-camera
-    image: torch.Tensor  # [H,W,3]
-    depth: torch.Tensor | None  # [H,W] metres, +inf = sky, NaN = unmeasured (scene/depth.py)
-    width: int
-    height: int
-
-    @property
-    def camera(self) -> CameraView:
-        """This view's camera (float64 from the stored float32 matrices) for renderers of stored Gaussians."""
-        return CameraView(self.viewmat.double().numpy(), self.K.double().numpy(), self.width, self.height)
-
-
-def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:
-    cam = manifest.camera(camera) if camera else manifest.cameras[0]
-    views = []
-    for i in frames:
-        cf = cam.frames[i]
-        if cf.image is None:
-            raise InputError(manifest.path or manifest.root, "frame has no image to train on",
-                             f"cameras.{cam.name}.frames[{i}].image")
-        img = read_image(manifest.resolve(cf.image), channels=3)
-        d = read_depth(manifest, cam, i) if depth else None
-        if d is not None:
-            d = torch.from_numpy(d)
-        views.append(View(i, torch.tensor(cf.K, dtype=torch.float32),
-                          torch.tensor(cf.world_to_camera, dtype=torch.float32),
-                          torch.from_numpy(img), d, cam.width, cam.height))
-    return views
 
 
 # ------------------------------------------------------------------ parameters
@@ -289,29 +256,38 @@ def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool)
     return out["rgb"], out["alpha"], out["info"], present
 
 
-def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, start: int, *, progress: bool = True,
-              desc: str = "reconstruct", keep=None) -> dict:
-    """Optimise ``parts`` jointly against ``views`` from iteration ``start``: the training loop with
-    density control per part (``keep(part) -> [N] bool``, optional: which Gaussians a part may keep
-    after each density step). Returns a log (start iteration, seconds, densification steps)."""
+def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructConfig, start: int, *,
+              until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None) -> dict:
+    """Optimise ``parts`` jointly against ``views`` from iteration ``start`` to ``until`` (default
+    ``cfg.iters``; a fit run in segments passes its :class:`Levels` so a coarse level is computed
+    once): the training loop with density control per part (``keep(part) -> [N] bool``, optional:
+    which Gaussians a part may keep after each density step). Every schedule is a function of the
+    iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
+    seconds, the iteration each image downscale began at, densification steps)."""
     from tqdm import tqdm
 
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
+    levels = views if isinstance(views, Levels) else Levels(views)
+    n_views = len(levels.views)
+    until = cfg.iters if until is None else min(until, cfg.iters)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
-    log = {"resumed_from": start, "densify": []}
+    log = {"resumed_from": start, "downscale": [], "densify": []}
     t0 = time.perf_counter()
-    bar = tqdm(range(start, cfg.iters), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
+    bar = tqdm(range(start, until), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
     for it in bar:
-        epoch, pos = divmod(it, len(views))
-        order = np.random.default_rng((cfg.seed, epoch)).permutation(len(views))
-        view = views[order[pos]]
+        epoch, pos = divmod(it, n_views)
+        order = np.random.default_rng((cfg.seed, epoch)).permutation(n_views)
+        factor = cfg.downscale_at(it)
+        if not log["downscale"] or log["downscale"][-1]["factor"] != factor:
+            log["downscale"].append({"iteration": it, "factor": factor})
+        view = levels.at(factor)[order[pos]]
         for part in parts:
             for group in part.opt.param_groups:
                 if group["name"] == "means":
                     group["lr"] = position_lr(cfg, part.extent, it)
-        degree = min(cfg.sh_degree, it // cfg.sh_every)
+        degree = cfg.sh_degree_at(it)
         rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if depth_weight > 0:
@@ -346,7 +322,8 @@ def fit_parts(views: list[View], parts: list[Part], cfg: ReconstructConfig, star
                 if part.checkpoint is not None:
                     part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
     bar.close()
-    if keep is not None:  # Gaussians drift after the last density step: the roles hold for the result too
+    if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
+        # for the result too
         log["pruned_at_end"] = {part.name: _keep(part, keep) for part in parts}
     log["seconds"] = time.perf_counter() - t0
     return log
@@ -381,19 +358,22 @@ class ReconstructResult:
     actors: dict[str, Gaussians] = field(default_factory=dict)  # recorded vehicles, each in its own frame
 
 
-def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path, resume: bool,
-                rng: np.random.Generator) -> list[Part]:
+def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path | None,
+                resume: bool, rng: np.random.Generator) -> list[Part]:
     """A part per recorded vehicle (:mod:`.decompose`), started on its box's faces in the colours the
-    training views show there."""
+    training views show there (checkpointed under ``out`` unless it is None)."""
     parts = []
     budget = replace(cfg.densify, max_gaussians=cfg.actor_max_gaussians, max_angular_size=float("inf"))
-    seen = [(v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views]
+
+    def seen():  # one float image at a time
+        return ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views)
+
     for t in tracks:
         initial = decompose.box_gaussians(t, cfg.actor_points, rng)
-        initial.sh[:, 0] = rgb_to_sh_dc(decompose.colour_from_views(t, initial.means.astype(np.float64), seen))
+        initial.sh[:, 0] = rgb_to_sh_dc(decompose.colour_from_views(t, initial.means.astype(np.float64), seen()))
+        checkpoint = None if out is None else Checkpoint(out / "checkpoint" / "actors" / t.actor_id)
         part, _ = Part.start(t.actor_id, initial, cfg, float(np.linalg.norm(t.half)), torch.zeros(3), budget,
-                             Checkpoint(out / "checkpoint" / "actors" / t.actor_id), resume,
-                             poses=t.poses, instance_id=t.instance_id, half=t.half)
+                             checkpoint, resume, poses=t.poses, instance_id=t.instance_id, half=t.half)
         parts.append(part)
     return parts
 
@@ -409,6 +389,55 @@ def keep_in_role(tracks: list[decompose.Track]):
     return keep
 
 
+@dataclass
+class Fit:
+    """A reconstruction of a package ready to train, from its start or its checkpoint: what
+    :func:`reconstruct` runs to the end at once and a benchmark runs in segments, scoring between
+    them (``iteration`` advances with each :meth:`train`)."""
+
+    cfg: ReconstructConfig  # the depth weight resolved for the camera it trains on
+    levels: Levels
+    parts: list[Part]
+    keep: Callable[[Part], np.ndarray] | None
+    iteration: int
+    train_frames: list[int]
+    heldout_frames: list[int]
+    extent: float
+
+    @staticmethod
+    def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
+        """The background, and with ``cfg.decompose`` one part per recorded vehicle; checkpointed
+        under ``out`` (None: not at all)."""
+        cfg = replace(cfg, depth_weight=cfg.depth_weight_for(manifest.cameras[0]))  # the camera load_views trains on
+        train_frames, heldout = split_frames(manifest, cfg.holdout_every)
+        views = load_views(manifest, train_frames, depth=True)
+        tracks = decompose.tracks(manifest) if cfg.decompose else []
+        checkpoint = None if out is None else Checkpoint(out / "checkpoint")
+        initial = None
+        if not (resume and checkpoint is not None and checkpoint.exists()):
+            initial = initial_gaussians(manifest, views, cfg)
+            if tracks:  # points on a moving car are smeared along its path: the vehicle's part explains them
+                initial = initial.subset(~decompose.in_swept_boxes(initial.means, tracks))
+        extent, centre = scene_extent(views)
+        background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
+        parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed))]
+        if not cfg.depth_weight:  # the depth maps seeded the sky; the loss does not read them
+            views = [replace(v, depth=None) for v in views]
+        return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
+                   extent)
+
+    def train(self, until: int | None = None, progress: bool = True) -> dict:
+        """Train to iteration ``until`` (default: the end); :func:`fit_parts`' log."""
+        log = fit_parts(self.levels, self.parts, self.cfg, self.iteration, until=until, progress=progress,
+                        keep=self.keep)
+        self.iteration = self.cfg.iters if until is None else min(until, self.cfg.iters)
+        return log
+
+    def gaussians(self) -> tuple[Gaussians, dict[str, Gaussians]]:
+        """(background, recorded vehicles by actor id, each in its own frame) as they stand."""
+        return self.parts[0].gaussians(), {p.name: p.gaussians() for p in self.parts[1:]}
+
+
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
                 resume: bool = False, progress: bool = True) -> ReconstructResult:
     """Fit the training frames: background Gaussians, and with ``cfg.decompose`` one set per
@@ -416,33 +445,20 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/`` and ``out/metrics.json``
     (the fit: iterations, timings, frames). Scoring the result is the caller's
     (``eval.views.evaluate_heldout`` on the held-out frames)."""
-    cfg = cfg or ReconstructConfig()
-    cfg = replace(cfg, depth_weight=cfg.depth_weight_for(manifest.cameras[0]))  # the camera load_views trains on
     out = Path(out)
-    train_frames, heldout = split_frames(manifest, cfg.holdout_every)
-    views = load_views(manifest, train_frames, depth=True)
-    tracks = decompose.tracks(manifest) if cfg.decompose else []
-    checkpoint = Checkpoint(out / "checkpoint")
-    initial = None
-    if not (resume and checkpoint.exists()):
-        initial = initial_gaussians(manifest, views, cfg)
-        if tracks:  # points on a moving car are smeared along its path: the vehicle's part explains them
-            initial = initial.subset(~decompose.in_swept_boxes(initial.means, tracks))
-    extent, centre = scene_extent(views)
-    background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
-    parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed))]
-    log = fit_parts(views, parts, cfg, start, progress=progress, keep=keep_in_role(tracks) if tracks else None)
+    run = Fit.start(manifest, cfg or ReconstructConfig(), out, resume)
+    start = run.iteration
+    log = run.train(progress=progress)
     seconds = log["seconds"]
-    g = background.gaussians()
+    g, actors = run.gaussians()
     write_splats(out / "background.ply", g)
-    actors = {p.name: p.gaussians() for p in parts[1:]}
     for name, ga in actors.items():
         write_splats(out / "actors" / f"{name}.ply", ga)
-    metrics = {"iterations": cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
-               "seconds_per_iteration": round(seconds / max(cfg.iters - start, 1), 4),
-               "gaussians": len(g), "train_frames": train_frames, "heldout_frames": heldout,
-               "extent_m": round(extent, 3), "depth_weight": cfg.depth_weight, "densify": log["densify"],
-               **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
+    metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
+               "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
+               "gaussians": len(g), "train_frames": run.train_frames, "heldout_frames": run.heldout_frames,
+               "extent_m": round(run.extent, 3), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
+               "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga)} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
     return ReconstructResult(g, metrics, out, actors)
