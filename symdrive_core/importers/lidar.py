@@ -3,9 +3,10 @@
 A recorded drive's LiDAR is the depth a reconstruction and the geometry-guided warp can trust,
 but it measures a few pixels of each image, not all of them. One scan per package frame (in
 name order, numbers compared as numbers): KITTI's ``velodyne`` ``.bin`` (float32 x, y, z,
-reflectance), an ``.npz`` whose ``points`` array is [N, >= 3], or a PLY with x, y, z. Points move
-into the camera by the rig's fixed sensor-to-camera transform and are projected with each
-frame's K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is
+reflectance), nuScenes' ``.pcd.bin`` (float32 x, y, z, intensity, ring), an ``.npz`` whose
+``points`` array is [N, >= 3], or a PLY with x, y, z. Points move into the camera by the rig's
+fixed sensor-to-camera transform (:func:`write_depth` also takes one per frame, for a LiDAR and a
+camera that record at different times on a moving vehicle) and are projected with each frame's K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is
 hidden by the pole). Maps are float EXR under ``lidar_depth/<camera>/``, 0 where no point landed,
 and the camera is declared ``depth_zero: "unmeasured"`` (see :mod:`..scene.depth`) so no reader
 takes the gaps for sky. Depths are in the scan's metres: the package's world must be metric
@@ -46,10 +47,12 @@ def read_scan(path: Path) -> np.ndarray:
         raise InputError(path, f"{size} bytes; scans above {MAX_SCAN_BYTES} bytes are not read", "points")
     suffix = path.suffix.lower()
     if suffix == ".bin":
-        if size % 16:
-            raise InputError(path, f"{size} bytes is not a whole number of KITTI records "
-                                   "(float32 x, y, z, reflectance)", "points")
-        points = np.fromfile(path, dtype="<f4").reshape(-1, 4)[:, :3]
+        nuscenes = path.name.lower().endswith(".pcd.bin")
+        record, fields = (20, "nuScenes records (float32 x, y, z, intensity, ring)") if nuscenes else \
+            (16, "KITTI records (float32 x, y, z, reflectance)")
+        if size % record:
+            raise InputError(path, f"{size} bytes is not a whole number of {fields}", "points")
+        points = np.fromfile(path, dtype="<f4").reshape(-1, record // 4)[:, :3]
     elif suffix == ".npz":
         points = _npz_points(path)
     elif suffix == ".ply":
@@ -121,6 +124,33 @@ def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray
     return depth.reshape(height, width).astype(np.float32)
 
 
+def seen_returns(scans: list[Path], world_from_sensor, sensor_to_camera, K: np.ndarray, width: int, height: int,
+                 images: list[Path], count: int, min_depth_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(points [N, 3] in the world of ``world_from_sensor[i]``, colours [N, 3]): of each scan
+    ``scans[i]`` an even share of ``count`` of the returns that land in a camera's image
+    (``sensor_to_camera[i]``, ``K``, ``width`` x ``height``), each coloured from ``images[i]`` where
+    it lands. A drive's metric points (the ground under the path, where the reconstruction starts)
+    with the colours its camera saw; the sample is seeded, so an import is repeatable."""
+    from ..io.images import read_image
+
+    rng = np.random.default_rng(0)
+    share = -(-count // len(scans))
+    points, colors = [], []
+    for scan, image, w_sensor, s_to_c in zip(scans, images, world_from_sensor, sensor_to_camera):
+        p = read_scan(scan)
+        uv, z = conventions.project_points(p, s_to_c, K)
+        with np.errstate(invalid="ignore"):
+            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
+            seen = (z >= min_depth_m) & (col >= 0) & (col < width) & (row >= 0) & (row < height)
+        keep = np.flatnonzero(seen)
+        if len(keep) > share:
+            keep = np.sort(rng.choice(keep, share, replace=False))
+        rgb = read_image(image, channels=3)
+        colors.append(rgb[row[keep].astype(np.int64), col[keep].astype(np.int64)])
+        points.append(p[keep] @ w_sensor[:3, :3].T + w_sensor[:3, 3])
+    return np.concatenate(points), np.concatenate(colors).astype(np.float64)
+
+
 def list_scans(folder: Path) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
@@ -134,15 +164,9 @@ def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, 
     """Write one sparse depth map per frame of ``camera`` (default: the package's first) from the
     scans in ``scans_dir``, moved into the camera by the ``calibration`` file
     (:func:`read_sensor_to_camera`; a KITTI one composed to ``kitti_camera``, else to the KITTI
-    camera the package's source notes, else to camera 0), and point the camera's frames at them.
-    The maps are written whole into the package (a temporary folder renamed into place) before
-    the manifest names them; bad input leaves the package as it was. Returns a summary (frames,
-    points, measured fraction, how the calibration was read)."""
-    from tqdm import tqdm
-
-    from ..io.atomic import atomic_directory
-    from ..io.images import write_image
-    from ..scene import is_inside, load_manifest
+    camera the package's source notes, else to camera 0), as :func:`write_depth` does. Returns a
+    summary (frames, points, measured fraction, how the calibration was read)."""
+    from ..scene import load_manifest
 
     m = load_manifest(package)
     where = m.path or m.root
@@ -151,7 +175,6 @@ def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, 
     except KeyError:
         raise InputError(where, f"no camera named {camera!r} (has: {', '.join(c.name for c in m.cameras)})",
                          "--camera") from None
-    ci = m.cameras.index(cam)
     held = m.source.get("kitti_camera")
     if kitti_camera is None and held is not None:
         if isinstance(held, bool) or not isinstance(held, int) or held not in CAMERAS:
@@ -163,6 +186,27 @@ def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, 
     if len(scans) != len(cam.frames):
         raise InputError(scans_dir, f"{len(scans)} scans ({', '.join(SCAN_SUFFIXES)}) for {len(cam.frames)} "
                                     "package frames: expected one scan per frame", "SCANS_DIR")
+    info = write_depth(m, cam, scans, [sensor_to_camera] * len(scans), force=force, config=config,
+                       progress=progress)
+    return {**info, "calibration": how}
+
+
+def write_depth(m, cam, scans: list[Path], sensor_to_camera, *, force: bool = False,
+                config: LidarConfig = LidarConfig(), progress: bool = True) -> dict:
+    """Write frame ``i``'s sparse depth map of camera ``cam`` of the loaded package ``m`` from
+    ``scans[i]`` moved into the camera by ``sensor_to_camera[i]`` [4, 4] (a rig's fixed transform
+    each frame, or the sensor's and the camera's poses each at its own time when the vehicle moves
+    between them), point the camera's frames at them and save the manifest. The maps are written
+    whole into the package (a temporary folder renamed into place) before the manifest names them;
+    bad input leaves the package as it was. Returns a summary (frames, points, measured fraction)."""
+    from tqdm import tqdm
+
+    from ..io.atomic import atomic_directory
+    from ..io.images import write_image
+    from ..scene import is_inside
+
+    where = m.path or m.root
+    ci = m.cameras.index(cam)
     if not force and any(cf.depth is not None for cf in cam.frames):
         first = next(i for i, cf in enumerate(cam.frames) if cf.depth is not None)
         raise InputError(where, f"camera {cam.name!r} already has depth maps; pass --force to replace them",
@@ -181,7 +225,7 @@ def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, 
             for fi, scan in enumerate(tqdm(scans, desc="lidar", unit="scan", disable=not progress)):
                 cf = cam.frames[fi]
                 pts = read_scan(scan)
-                depth = sparse_depth(pts, sensor_to_camera, cf.K, cam.width, cam.height, config.min_depth_m)
+                depth = sparse_depth(pts, sensor_to_camera[fi], cf.K, cam.width, cam.height, config.min_depth_m)
                 write_image(tmp / f"{fi:06d}.exr", depth, dtype="float")
                 points += len(pts)
                 coverage.append(float((depth > 0).mean()))
@@ -194,5 +238,4 @@ def import_lidar(package, scans_dir, calibration, *, camera: str | None = None, 
     cam.depth_zero = "unmeasured"
     m.save()
     return {"package": str(m.root), "camera": cam.name, "frames": len(scans), "points": points,
-            "measured_fraction": float(np.mean(coverage)), "folder": f"{DEPTH_FOLDER}/{cam.name}",
-            "calibration": how}
+            "measured_fraction": float(np.mean(coverage)), "folder": f"{DEPTH_FOLDER}/{cam.name}"}
