@@ -12,6 +12,7 @@ import time
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
 from ..importers.kitti_calib import CAMERAS as KITTI_CAMERAS
 from ..importers.kitti_raw import KittiRawConfig
+from ..importers.nuscenes import NuScenesConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
 from . import add_quiet_option, count_int, default_of, positive_int
 
@@ -70,6 +71,7 @@ def add_commands(sub) -> None:
     _common(p, images=False)
     p.set_defaults(func=_kitti)
     _kitti_raw_command(isub)
+    _nuscenes_command(isub)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
     _common(p, images=True)
@@ -120,6 +122,27 @@ def _camera_list(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected distinct KITTI cameras among "
                                          f"{','.join(map(str, KITTI_CAMERAS))} (2,3), got {text!r}")
     return cameras
+
+
+def _nuscenes_command(isub) -> None:
+    p = isub.add_parser("nuscenes", help="nuScenes scene (DATAROOT with VERSION/ tables and samples/): its cameras, "
+                                         "ego poses, LIDAR_TOP depth and annotated vehicles")
+    p.add_argument("dataroot", metavar="DATAROOT", help="the folder holding VERSION/ (scene.json, ...) and samples/")
+    p.add_argument("--version", help=f"the tables' folder under DATAROOT (default {NuScenesConfig.version})")
+    p.add_argument("--scene", required=True, help="the scene's name (scene-0061)")
+    p.add_argument("--cameras", type=_channel_list, metavar="CAM,...",
+                   help="channels imported as package cameras, the first the package's first "
+                        f"(default {','.join(NuScenesConfig.cameras)})")
+    _common(p, images=False, camera_name=False)
+    p.set_defaults(func=_nuscenes)
+
+
+def _channel_list(text: str) -> tuple[str, ...]:
+    channels = tuple(t.strip() for t in text.split(","))
+    if not all(channels) or len(set(channels)) != len(channels):
+        raise argparse.ArgumentTypeError(f"expected distinct channels separated by commas (CAM_FRONT,CAM_BACK), "
+                                         f"got {text!r}")
+    return channels
 
 
 def _tracks_command(isub) -> None:
@@ -332,14 +355,42 @@ def _kitti_raw(args) -> int:
 
 def _kitti_raw_report(extended: dict) -> None:
     """What a KITTI raw drive's LiDAR and tracklets added to the package."""
-    for info in extended["lidar"]:
-        print(f"LiDAR depth for camera {info['camera']} in {info['folder']}/: {info['points']} points, "
-              f"{100 * info['measured_fraction']:.1f}% of pixels measured")
+    _lidar_report(extended["lidar"])
     tracks = extended["tracks"]
     if tracks is not None:
         skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
         print(f"tracklets: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
               f"({tracks['outside']} in frames not imported); types skipped: {skipped}")
+
+
+def _lidar_report(lidar: list[dict]) -> None:
+    for info in lidar:
+        print(f"LiDAR depth for camera {info['camera']} in {info['folder']}/: {info['points']} points, "
+              f"{100 * info['measured_fraction']:.1f}% of pixels measured")
+
+
+def _nuscenes(args) -> int:
+    from dataclasses import replace
+
+    from ..importers.nuscenes import read_nuscenes
+    from . import given
+
+    t0 = time.perf_counter()
+    opt = _options(args)
+    config = replace(NuScenesConfig(), **given(args, "version", "cameras"))
+    scene = read_nuscenes(args.dataroot, args.scene, config, splats=args.splats, progress=not args.quiet)
+    # nuScenes' global frame is metric; the ground is fitted to the LiDAR's returns.
+    return _finish(scene.source, args, t0, options=replace(opt, scale=opt.scale or 1.0), extend=scene.extend,
+                   report=_nuscenes_report)
+
+
+def _nuscenes_report(extended: dict) -> None:
+    """What a nuScenes scene's LiDAR and annotations added to the package."""
+    _lidar_report(extended["lidar"])
+    tracks = extended["tracks"]
+    skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
+    print(f"annotations: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes; categories "
+          f"skipped: {skipped}")
 
 
 def _gs(args) -> int:

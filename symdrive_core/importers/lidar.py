@@ -6,8 +6,9 @@ name order, numbers compared as numbers): KITTI's ``velodyne`` ``.bin`` (float32
 reflectance), nuScenes' ``.pcd.bin`` (float32 x, y, z, intensity, ring), an ``.npz`` whose
 ``points`` array is [N, >= 3], or a PLY with x, y, z. Points move into the camera by the rig's
 fixed sensor-to-camera transform (:func:`write_depth` also takes one per frame, for a LiDAR and a
-camera that record at different times on a moving vehicle) and are projected with each frame's K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is
-hidden by the pole). Maps are float EXR under ``lidar_depth/<camera>/``, 0 where no point landed,
+camera that record at different times on a moving vehicle) and are projected with each frame's
+K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is hidden by
+the pole). Maps are float EXR under ``lidar_depth/<camera>/``, 0 where no point landed,
 and the camera is declared ``depth_zero: "unmeasured"`` (see :mod:`..scene.depth`) so no reader
 takes the gaps for sky. Depths are in the scan's metres: the package's world must be metric
 (import it with ``--camera-height`` or ``--scale``).
