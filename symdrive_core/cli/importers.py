@@ -1,5 +1,5 @@
 """``symdrive import colmap|nerfstudio|3dgs|kitti``: a reconstruction or a KITTI drive -> a scene package
-(``kitti-raw``: with its LiDAR depth and tracked vehicles);
+(``kitti-raw``, ``kitti-360``: with its LiDAR depth and tracked vehicles);
 ``symdrive import lidar``: its LiDAR scans -> the package's sparse depth; ``symdrive import tracks``:
 its vehicles' per-frame boxes -> the package's existing actors."""
 
@@ -10,11 +10,12 @@ import sys
 import time
 
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
+from ..importers.kitti360 import Kitti360Config
 from ..importers.kitti_calib import CAMERAS as KITTI_CAMERAS
 from ..importers.kitti_raw import KittiRawConfig
 from ..importers.nuscenes import NuScenesConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
-from . import add_quiet_option, count_int, default_of, positive_int
+from . import add_quiet_option, count_int, default_of, frames_arg, positive_int
 
 
 def _common(p, images: bool, camera_name: bool = True) -> None:
@@ -71,6 +72,7 @@ def add_commands(sub) -> None:
     _common(p, images=False)
     p.set_defaults(func=_kitti)
     _kitti_raw_command(isub)
+    _kitti360_command(isub)
     _nuscenes_command(isub)
     p = isub.add_parser("3dgs", help="the original 3DGS trainer's output folder (cameras.json, point_cloud/)")
     p.add_argument("model", metavar="MODEL_DIR", help="the 3DGS trainer's output folder (cameras.json, point_cloud/)")
@@ -111,6 +113,24 @@ def _kitti_raw_command(isub) -> None:
     _common(p, images=False, camera_name=False)
     _lateral_truth_option(p)
     p.set_defaults(func=_kitti_raw)
+
+
+def _kitti360_command(isub) -> None:
+    p = isub.add_parser("kitti-360", help="KITTI-360 sequence (ROOT with calibration/, data_2d_raw/, data_poses/): its "
+                                          "perspective cameras, poses, Velodyne depth and vehicle boxes")
+    p.add_argument("root", metavar="ROOT", help="KITTI-360's root folder (calibration/, data_2d_raw/, data_3d_raw/, "
+                                                "data_poses/, data_3d_bboxes/)")
+    p.add_argument("--sequence", required=True, help="the sequence's folder name (2013_05_28_drive_0000_sync)")
+    p.add_argument("--cameras", type=_camera_list, metavar="I,...",
+                   help="perspective cameras imported as package cameras image_0I (default "
+                        f"{','.join(map(str, Kitti360Config.cameras))})")
+    p.add_argument("--frames", type=frames_arg, metavar="A:B,...",
+                   help="sequence frame numbers to import, e.g. 250:499 (default: every frame with an image and a pose)")
+    p.add_argument("--types", type=_type_list, metavar="CLASS,...",
+                   help=f"box classes imported as vehicles (default {','.join(Kitti360Config.types)})")
+    _common(p, images=False, camera_name=False)
+    _lateral_truth_option(p)
+    p.set_defaults(func=_kitti360)
 
 
 def _camera_list(text: str) -> tuple[int, ...]:
@@ -391,6 +411,46 @@ def _nuscenes_report(extended: dict) -> None:
     skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
     print(f"annotations: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes; categories "
           f"skipped: {skipped}")
+
+
+def _kitti360(args) -> int:
+    from dataclasses import replace
+
+    import numpy as np
+
+    from ..importers.ground import path_up
+    from ..importers.kitti360 import read_kitti360
+    from . import given
+
+    t0 = time.perf_counter()
+    opt = _options(args)
+    fields = given(args, "cameras", "types", "frames")
+    if "frames" in fields:
+        fields["frames"] = tuple(fields["frames"])
+    seq = read_kitti360(args.root, args.sequence, replace(Kitti360Config(), **fields), splats=args.splats,
+                        fps=args.fps, progress=not args.quiet)
+    src = _with_lateral_truth(seq.source, args)
+    n = src.notes["frames_without_pose"]
+    if n:
+        print(f"{n} frame(s) with images but no pose in {src.notes['poses']} left out (the first: "
+              f"{', '.join(src.notes['frames_without_pose_first'])})", flush=True)
+    if src.points is None:
+        print("note: no data_3d_raw velodyne scans: no LiDAR depth; the ground's plane is the camera path's", flush=True)
+    # KITTI-360's world is metric. Without LiDAR points the ground's plane is the one the path rides on.
+    c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
+    up = opt.up or (None if src.points is not None else tuple(path_up(c2ws).tolist()))
+    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up), extend=seq.extend,
+                   report=_kitti360_report)
+
+
+def _kitti360_report(extended: dict) -> None:
+    """What a KITTI-360 sequence's LiDAR and 3D boxes added to the package."""
+    _lidar_report(extended["lidar"])
+    tracks = extended["tracks"]
+    if tracks is not None:
+        skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
+        print(f"3D boxes: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
+              f"({tracks['outside']} box(es) in no imported frame); classes skipped: {skipped}")
 
 
 def _gs(args) -> int:

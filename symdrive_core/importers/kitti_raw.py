@@ -74,7 +74,8 @@ def _labels(path: Path) -> dict[str, str]:
     return labels_of(read_small_text(path, "calibration"))
 
 
-def _numbers(labels: dict[str, str], key: str, count: int, path: Path) -> np.ndarray:
+def labelled_numbers(labels: dict[str, str], key: str, count: int, path: Path) -> np.ndarray:
+    """The ``count`` numbers of line ``key`` of a calibration file's ``labels`` (a missing line named)."""
     if key not in labels:
         raise InputError(path, f"no {key} line", key)
     return finite_numbers(labels[key], count, path, key)
@@ -84,8 +85,8 @@ def _imu_to_velo(path: Path) -> np.ndarray:
     """The IMU -> Velodyne transform of ``calib_imu_to_velo.txt`` (``R``: 9 numbers, ``T``: 3)."""
     labels = _labels(path)
     T = np.eye(4)
-    T[:3, :3] = _numbers(labels, "R", 9, path).reshape(3, 3)
-    T[:3, 3] = _numbers(labels, "T", 3, path)
+    T[:3, :3] = labelled_numbers(labels, "R", 9, path).reshape(3, 3)
+    T[:3, 3] = labelled_numbers(labels, "T", 3, path)
     if not conventions.is_rigid(T):
         raise InputError(path, "not a rotation (orthonormal, det +1)", "R")
     return T
@@ -116,7 +117,7 @@ def read_calibration(date_dir: Path, cameras: tuple[int, ...]) -> dict[int, Came
         if key not in rect:
             raise InputError(rect_path, f"no {key} line (KITTI camera {i}'s projection)", key)
         P = projection(rect[key], rect_path, key)
-        size = _numbers(rect, f"S_rect_{i:02d}", 2, rect_path)
+        size = labelled_numbers(rect, f"S_rect_{i:02d}", 2, rect_path)
         if not np.all((size >= 1) & (size == np.round(size))):
             raise InputError(rect_path, f"expected an image size in whole pixels, got {size.tolist()}",
                              f"S_rect_{i:02d}")
@@ -129,11 +130,11 @@ def read_calibration(date_dir: Path, cameras: tuple[int, ...]) -> dict[int, Came
 # ---------------------------------------------------------------- frames, times
 
 
-def _frames(drive: Path, cameras: tuple[int, ...]) -> dict[int, dict[str, Path]]:
-    """Per camera, frame name -> image; every camera must hold the same frames."""
+def camera_frames(drive: Path, cameras: tuple[int, ...], sub: str = "data") -> dict[int, dict[str, Path]]:
+    """Per camera, frame name -> image of ``image_0i/<sub>/``; every camera must hold the same frames."""
     out: dict[int, dict[str, Path]] = {}
     for i in cameras:
-        folder = drive / camera_name(i) / "data"
+        folder = drive / camera_name(i) / sub
         if not folder.is_dir():
             raise InputError(folder, f"no images of KITTI camera {i}", "--cameras")
         out[i] = {p.stem: p for p in folder.iterdir() if p.suffix.lower() == ".png" and p.stem.isdigit()}
@@ -144,7 +145,7 @@ def _frames(drive: Path, cameras: tuple[int, ...]) -> dict[int, dict[str, Path]]
         missing = sorted(set(out[first]) ^ set(out[i]))
         if missing:
             has = camera_name(first) if missing[0] in out[first] else camera_name(i)
-            raise InputError(drive / has / "data" / f"{missing[0]}.png", "frame not recorded by every camera chosen "
+            raise InputError(drive / has / sub / f"{missing[0]}.png", "frame not recorded by every camera chosen "
                              f"({', '.join(camera_name(c) for c in cameras)})", "--cameras")
     return out
 
@@ -162,7 +163,7 @@ def _clock(text: str, path: Path, where: str) -> tuple[int, float]:
     return int((t - datetime(1970, 1, 1)).total_seconds()), float(f"0.{frac or 0}")
 
 
-def _times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
+def frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
     """(seconds since the first of ``names``, that frame's time as written) from a camera's
     ``timestamps.txt`` (line n: frame n), or None when the camera has none."""
     if not path.is_file():
@@ -257,14 +258,14 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
         raise InputError(drive, "not a folder (expected a KITTI raw drive, DATE/DATE_drive_NNNN_sync)", "DRIVE_DIR")
     cameras = tuple(config.cameras)
     rig = read_calibration(drive.resolve().parent, cameras)
-    images = _frames(drive, cameras)
+    images = camera_frames(drive, cameras)
     names = sorted(images[cameras[0]], key=int)
     oxts = [drive / "oxts" / "data" / f"{name}.txt" for name in names]
     world_from_imu, projection = imu_poses(np.stack([read_record(p) for p in oxts]))
     views, time_origin = [], None
     for i in cameras:
         cam, folder = rig[i], camera_name(i)
-        times = _times(drive / folder / "timestamps.txt", names)
+        times = frame_times(drive / folder / "timestamps.txt", names)
         if times is not None and time_origin is None:
             time_origin = times[1]
         cam_from_imu_inv = conventions.invert_rigid(cam.imu_to_camera)
