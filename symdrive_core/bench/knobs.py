@@ -1,10 +1,11 @@
 """The knobs ``symdrive bench accuracy-time`` measures, each against a package's ground truth.
 
-Renderer knobs (antialiasing, footprint extent, SH degree, precision, resolution) are scored on
-the package's held-out recorded frames; restorer knobs (sampler steps and ``N_start``, the
+Renderer knobs (antialiasing, footprint extent, SH degree, precision, resolution) and whole
+reconstructions (iterations, resolution schedule, end of densification: :mod:`.reconstruction`)
+are scored on the package's held-out recorded frames; restorer knobs (sampler steps and ``N_start``, the
 auto-regressive step ``d``) on its lateral views; fine-tune iterations on its held-out insertion
 placements. A group whose ground truth the package lacks is left out and the reason returned.
-Seconds are the work itself (per frame, per view or per placement), not loading.
+Seconds are the work itself (per frame, per view, per placement or per run), not loading.
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ class Budget:
     restore_frames: int = 2  # recorded frames whose lateral views are restored
     offsets: tuple[float, ...] = (1.0, 3.0)
     placements: int = 3  # held-out insertion placements
+    reconstruct_iters: int = 1000  # iterations of each reconstruction setting
 
 
-QUICK = Budget(render_frames=1, restore_frames=1, offsets=(3.0,), placements=1)
+QUICK = Budget(render_frames=1, restore_frames=1, offsets=(3.0,), placements=1, reconstruct_iters=100)
 
 
 def spread(items: list, n: int) -> list:
@@ -301,6 +303,12 @@ def package_settings(manifest, quick: bool = False) -> tuple[list[Setting], dict
         settings += renderer_settings(manifest, gaussians, budget)
     else:
         skipped["renderer"] = "no held-out recorded frames"
+    if heldout and manifest.background_points:
+        from .reconstruction import reconstruction_settings
+
+        settings += reconstruction_settings(manifest, budget.reconstruct_iters)
+    else:
+        skipped["reconstruction"] = "no held-out recorded frames" if not heldout else "no point cloud to start from"
     restorer = load_restorer() if lateral or insertion else None
     if lateral:
         settings += restorer_settings(manifest, gaussians, restorer, budget)

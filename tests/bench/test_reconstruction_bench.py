@@ -1,0 +1,71 @@
+"""Reconstruction schedules against time: the curves, the time to the default's PSNR, the rows of
+``bench accuracy-time``."""
+
+import json
+
+import pytest
+
+from symdrive_core.bench import reconstruction as bench
+from symdrive_core.bench.accuracy_time import run_settings
+from symdrive_core.io.images import read_image
+from symdrive_core.optim.config import ReconstructConfig
+from symdrive_core.scene import load_manifest
+from tests.optim.conftest import write_package
+
+TINY = dict(densify_from=10, densify_every=10, sky_points=0)
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    root, _ = write_package(tmp_path_factory.mktemp("bench") / "pkg")
+    return load_manifest(root)
+
+
+def test_time_to_the_defaults_psnr_is_a_ratio_of_its_whole_time():
+    rows = [{"schedule": "a", "iteration": 0, "seconds": 0.0, "psnr": 20.0, "ssim": 0.5, "gaussians": 10},
+            {"schedule": "b", "iteration": 0, "seconds": 0.0, "psnr": 20.0, "ssim": 0.5, "gaussians": 10},
+            {"schedule": "a", "iteration": 10, "seconds": 10.0, "psnr": 25.0, "ssim": 0.7, "gaussians": 10},
+            {"schedule": "b", "iteration": 10, "seconds": 4.0, "psnr": 25.5, "ssim": 0.7, "gaussians": 10},
+            {"schedule": "a", "iteration": 20, "seconds": 20.0, "psnr": 26.0, "ssim": 0.8, "gaussians": 10},
+            {"schedule": "b", "iteration": 20, "seconds": 8.0, "psnr": 25.9, "ssim": 0.8, "gaussians": 10}]
+    s = bench.summary(rows, "a")
+    assert s["target_psnr"] == 26.0 and s["schedules"]["a"]["time_ratio"] == 1.0
+    assert s["schedules"]["b"]["seconds_to_target"] is None and s["schedules"]["b"]["time_ratio"] is None
+    assert bench.seconds_to_reach(rows, "b", 25.2) == 4.0
+    assert "| b | 20 | 25.90 | 0.8000 | 8 | never |  |" in bench.format_summary(s)
+
+
+def test_the_default_schedule_is_the_one_equal_to_the_config():
+    configs = bench.schedule_configs(40)
+    assert all(c.iters == 40 for c in configs.values())
+    default = bench.default_name(configs)
+    assert configs[default].resolution_schedule == ReconstructConfig().resolution_schedule
+
+
+def test_curves_score_each_schedule_every_k_iterations_and_write_the_figure(package, tmp_path):
+    configs = {name: ReconstructConfig(iters=40, **TINY, **over) for name, over in bench.SCHEDULES.items()}
+    rows = bench.curves(package, configs, every=20, progress=False)
+    for name in configs:
+        mine = [r for r in rows if r["schedule"] == name]
+        assert [r["iteration"] for r in mine] == [0, 20, 40]
+        assert mine[0]["seconds"] == 0.0 < mine[1]["seconds"] < mine[2]["seconds"]
+        assert mine[-1]["psnr"] > mine[0]["psnr"]
+    s = bench.summary(rows, bench.default_name(configs))
+    paths = bench.write_outputs(rows, s, configs, tmp_path, "synthetic")
+    assert json.loads(paths["json"].read_text())["configs"]["coarse to fine"]["resolution_schedule"] == [0.1, 0.3]
+    assert paths["csv"].read_text().startswith("schedule,iteration,seconds,psnr,ssim,gaussians")
+    assert read_image(paths["png"]).ndim == 3
+
+
+def test_accuracy_time_rows_fit_a_shared_setting_once(package, monkeypatch):
+    from symdrive_core.optim import reconstruct
+
+    starts = []
+    start = reconstruct.Fit.start
+    monkeypatch.setattr(reconstruct.Fit, "start", staticmethod(lambda m, cfg: starts.append(cfg) or start(m, cfg)))
+    settings = bench.reconstruction_settings(package, 20)
+    rows = run_settings(settings, progress=False)
+    assert {r["knob"] for r in rows} == {"reconstruction iterations", "resolution schedule", "densify until"}
+    assert len(starts) == len({repr(c) for c in starts}) == 4  # 10 and 20 iterations, coarse to fine, densify 0.3
+    full = next(r for r in rows if r["value"] == "full resolution")
+    assert full["default"] and full["psnr"] == next(r["psnr"] for r in rows if r["value"] == "20")
