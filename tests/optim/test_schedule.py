@@ -45,6 +45,11 @@ def test_an_eight_bit_image_is_held_as_uint8_and_read_back_exactly():
     assert held_pixels(image + 0.1 / 255).dtype == torch.float32  # not 8-bit levels: kept as it is
 
 
+def test_a_packages_png_frames_are_held_as_uint8(synthetic_package):
+    views = load_views(load_manifest(synthetic_package[0]), [0, 2])
+    assert all(v.pixels.dtype == torch.uint8 and v.image.shape == (H, W, 3) for v in views)
+
+
 def test_a_coarse_level_is_the_area_average_with_k_scaled_about_pixel_edges():
     rng = np.random.default_rng(1)
     image = rng.random((9, 13, 3)).astype(np.float32)  # odd sides: the last row and column are cropped
