@@ -57,10 +57,14 @@ def add_commands(sub) -> None:
     p.add_argument("--static", action="store_true",
                    help="one static scene: do not fit the recorded vehicles (existing actors with a box) in their own "
                         "frames")
+    p.add_argument("--refine-poses", action=argparse.BooleanOptionalAction, default=None,
+                   help="learn a correction of each recorded vehicle's per-frame pose with its Gaussians, written back "
+                        "as its recorded poses (the tracks' boxes kept as tracked_poses); default: the vehicles whose "
+                        "boxes came from `symdrive import tracks`")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats (and the recorded vehicles' assets.splats) at "
-                        "the result")
+                        "the result, nor write refined poses into it")
     add_quiet_option(p)
     add_external_assets_option(p)
     p.set_defaults(func=_reconstruct)
@@ -69,6 +73,7 @@ def add_commands(sub) -> None:
 def _reconstruct(args) -> int:
     import json
 
+    from ..optim.pose_refine import with_refined
     from ..optim.reconstruct import reconstruct
     from ..scene import ManifestError, is_inside, load_manifest
 
@@ -76,6 +81,7 @@ def _reconstruct(args) -> int:
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
                                     "max_init_points", "seed", densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
+    cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
     if args.static:
         cfg.decompose = False
     if args.lateral:  # checked before hours of fitting, not after
@@ -87,6 +93,7 @@ def _reconstruct(args) -> int:
         raise ManifestError(manifest.path or manifest.root, "'reconstruction' leads out of the package (a link); "
                             "pass --out", "reconstruction")
     result = reconstruct(manifest, out, cfg, resume=args.resume, progress=not args.quiet)
+    with_refined(manifest, result.poses)  # scored, and linked, where the vehicles were fitted
     metrics = result.metrics
     if metrics["heldout_frames"] or args.lateral:
         from ..eval.views import evaluate_heldout, evaluate_lateral

@@ -18,6 +18,23 @@ class DensifyConfig:
 
 
 @dataclass
+class PoseRefineConfig:
+    """Per-frame pose corrections of tracked vehicles, fitted with their Gaussians (``pose_refine.py``)."""
+
+    # None: the vehicles whose boxes came from tracks (``source.tracks``, as ``import tracks`` records
+    # them); True: every recorded vehicle; False: none (the boxes taken as exact).
+    enabled: bool | None = None
+    start_fraction: float = 0.1  # corrections wait until then: a vehicle's Gaussians start as a grey box
+    lr_m: float = 1e-3  # Adam's step of the translation corrections, metres per iteration
+    lr_rad: float = 1e-4  # and of the yaw corrections, radians
+    prior_m: float = 0.3  # the track's error scale the pull towards it assumes
+    prior_rad: float = 0.05
+    smooth_m: float = 0.05  # a second difference of the trajectory this large costs as a prior_m correction
+    smooth_rad: float = 0.01
+    weight: float = 1e-3  # of the priors against one view's photometric loss
+
+
+@dataclass
 class ReconstructConfig:
     iters: int = 3000
     # Coarse to fine: fractions of ``iters`` at each of which the training images' downscale
@@ -53,6 +70,7 @@ class ReconstructConfig:
     decompose: bool = True
     actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
     actor_max_gaussians: int = 40_000
+    pose_refine: PoseRefineConfig = field(default_factory=PoseRefineConfig)
 
     def downscale_at(self, it: int) -> int:
         """The factor the training images are downscaled by at iteration ``it`` (a power of 2)."""

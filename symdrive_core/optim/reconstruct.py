@@ -31,7 +31,7 @@ from ..scene import Manifest
 from ..scene.depth import is_sky, measured
 from ..scene.ground_truth import split_frames
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
-from . import decompose
+from . import decompose, pose_refine
 from .config import DensifyConfig, ReconstructConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .losses import photometric
@@ -214,6 +214,7 @@ class Part:
     poses: list | None = None  # per frame local -> world Pose, None where absent
     instance_id: int = 0
     half: np.ndarray | None = None  # a vehicle's box half extents (x length, y width, z height)
+    refine: pose_refine.PoseRefinement | None = None  # a tracked vehicle's learnt pose corrections
 
     @staticmethod
     def start(name: str, initial: Gaussians | None, cfg: ReconstructConfig, extent: float, centre: torch.Tensor,
@@ -235,6 +236,8 @@ class Part:
         g = activate(self.params, degree)
         if self.poses is None:
             return Layer(g)
+        if self.refine is not None:
+            return Layer(g, *self.refine.pose(frame), self.instance_id)
         p = self.poses[frame]
         return Layer(g, torch.as_tensor(p.R, dtype=torch.float32), torch.as_tensor(p.translation, dtype=torch.float32),
                      self.instance_id)
@@ -273,6 +276,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     until = cfg.iters if until is None else min(until, cfg.iters)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
+    refining = [p.refine for p in parts if p.refine is not None]
     log = {"resumed_from": start, "downscale": [], "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, until), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
@@ -294,6 +298,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
             dl = depth_loss(info, alpha, view.depth)
             if dl is not None:
                 loss = loss + depth_weight * dl
+        for r in refining:
+            loss = loss + r.penalty(n_views)
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
         means2d = info["means2d"]
@@ -308,6 +314,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 row += n
         for part in parts:
             part.opt.step()
+        for r in refining:
+            r.step(it)
         step = it + 1
         if cfg.densify_from <= step < densify_until and step % cfg.densify_every == 0:
             for part in parts:
@@ -321,6 +329,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
             for part in parts:
                 if part.checkpoint is not None:
                     part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
+                    if part.refine is not None:
+                        part.refine.save(part.checkpoint.folder)
     bar.close()
     if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
         # for the result too
@@ -356,12 +366,16 @@ class ReconstructResult:
     metrics: dict
     output: Path
     actors: dict[str, Gaussians] = field(default_factory=dict)  # recorded vehicles, each in its own frame
+    poses: dict[str, list] = field(default_factory=dict)  # tracked vehicles' refined poses, per frame
 
 
 def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path | None,
-                resume: bool, rng: np.random.Generator) -> list[Part]:
+                resume: bool, rng: np.random.Generator,
+                refine: dict[str, pose_refine.PoseRefinement] | None = None) -> list[Part]:
     """A part per recorded vehicle (:mod:`.decompose`), started on its box's faces in the colours the
-    training views show there (checkpointed under ``out`` unless it is None)."""
+    training views show there (checkpointed under ``out`` unless it is None), with its pose
+    corrections where ``refine`` has them."""
+    refine = refine or {}
     parts = []
     budget = replace(cfg.densify, max_gaussians=cfg.actor_max_gaussians, max_angular_size=float("inf"))
 
@@ -373,7 +387,10 @@ def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: Reconstru
         initial.sh[:, 0] = rgb_to_sh_dc(decompose.colour_from_views(t, initial.means.astype(np.float64), seen()))
         checkpoint = None if out is None else Checkpoint(out / "checkpoint" / "actors" / t.actor_id)
         part, _ = Part.start(t.actor_id, initial, cfg, float(np.linalg.norm(t.half)), torch.zeros(3), budget,
-                             checkpoint, resume, poses=t.poses, instance_id=t.instance_id, half=t.half)
+                             checkpoint, resume, poses=t.poses, instance_id=t.instance_id, half=t.half,
+                             refine=refine.get(t.actor_id))
+        if resume and checkpoint is not None and part.refine is not None:
+            part.refine.load(checkpoint.folder)
         parts.append(part)
     return parts
 
@@ -412,6 +429,7 @@ class Fit:
         train_frames, heldout = split_frames(manifest, cfg.holdout_every)
         views = load_views(manifest, train_frames, depth=True)
         tracks = decompose.tracks(manifest) if cfg.decompose else []
+        tracks, refine = pose_refine.refinements(manifest, tracks, cfg)
         checkpoint = None if out is None else Checkpoint(out / "checkpoint")
         initial = None
         if not (resume and checkpoint is not None and checkpoint.exists()):
@@ -420,7 +438,7 @@ class Fit:
                 initial = initial.subset(~decompose.in_swept_boxes(initial.means, tracks))
         extent, centre = scene_extent(views)
         background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
-        parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed))]
+        parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
         if not cfg.depth_weight:  # the depth maps seeded the sky; the loss does not read them
             views = [replace(v, depth=None) for v in views]
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
@@ -437,14 +455,20 @@ class Fit:
         """(background, recorded vehicles by actor id, each in its own frame) as they stand."""
         return self.parts[0].gaussians(), {p.name: p.gaussians() for p in self.parts[1:]}
 
+    def poses(self) -> dict[str, list]:
+        """The tracked vehicles' refined poses as they stand, by actor id (per frame, None: no box)."""
+        return {p.name: p.refine.refined() for p in self.parts if p.refine is not None}
+
 
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
                 resume: bool = False, progress: bool = True) -> ReconstructResult:
     """Fit the training frames: background Gaussians, and with ``cfg.decompose`` one set per
     recorded vehicle (``existing`` actors with a box) in its own frame. Writes
-    ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/`` and ``out/metrics.json``
-    (the fit: iterations, timings, frames). Scoring the result is the caller's
-    (``eval.views.evaluate_heldout`` on the held-out frames)."""
+    ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/``, ``out/metrics.json``
+    (the fit: iterations, timings, frames) and, where tracked vehicles' poses were refined
+    (:mod:`.pose_refine`), ``out/poses.json``. Scoring the result is the caller's
+    (``eval.views.evaluate_heldout`` on the held-out frames, ``pose_refine.with_refined`` placing
+    the vehicles where they were fitted)."""
     out = Path(out)
     run = Fit.start(manifest, cfg or ReconstructConfig(), out, resume)
     start = run.iteration
@@ -454,11 +478,15 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     write_splats(out / "background.ply", g)
     for name, ga in actors.items():
         write_splats(out / "actors" / f"{name}.ply", ga)
+    poses = run.poses()
+    if poses:
+        pose_refine.write_refined(out, poses)
+    corrections = {p.name: {"pose_correction": p.refine.corrections()} for p in run.parts if p.refine is not None}
     metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": run.train_frames, "heldout_frames": run.heldout_frames,
                "extent_m": round(run.extent, 3), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
-               "actors": {name: {"gaussians": len(ga)} for name, ga in actors.items()}}
+               "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-    return ReconstructResult(g, metrics, out, actors)
+    return ReconstructResult(g, metrics, out, actors, poses)

@@ -81,6 +81,9 @@ class Actor:
     # An existing actor's poses as the drive recorded them, when an edit changed ``poses`` (None:
     # unedited, the recorded poses are ``poses``). Its Gaussians are fitted at these.
     recorded_poses: list[Pose | None] | None = None
+    # The tracks' boxes, when a reconstruction refined them (its refined poses are then the
+    # recorded poses): what a later refinement starts from again. None: not refined.
+    tracked_poses: list[Pose | None] | None = None
 
     def pose(self, frame: int) -> Pose | None:
         return self.poses[frame]
@@ -266,6 +269,8 @@ class Manifest:
                 "poses": [None if p is None else p.to_json() for p in a.poses],
                 **({} if a.recorded_poses is None else {
                     "recorded_poses": [None if p is None else p.to_json() for p in a.recorded_poses]}),
+                **({} if a.tracked_poses is None else {
+                    "tracked_poses": [None if p is None else p.to_json() for p in a.tracked_poses]}),
             } for a in self.actors],
             "masks": {
                 "entries": [{k: v for k, v in vars(m).items() if v is not None} for m in self.masks],
@@ -461,10 +466,15 @@ def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
             if kind != "existing":
                 rd.fail(f"{w}.recorded_poses", "only an existing actor has recorded poses")
             recorded = _pose_list(rd, a["recorded_poses"], f"{w}.recorded_poses", nf)
+        tracked = None
+        if a.get("tracked_poses") is not None:
+            if kind != "existing":
+                rd.fail(f"{w}.tracked_poses", "only an existing actor has tracked poses")
+            tracked = _pose_list(rd, a["tracked_poses"], f"{w}.tracked_poses", nf)
         iid = rd.integer(a.get("instance_id", ai + 1), f"{w}.instance_id", 1, ID_MAX)
         if any(x.instance_id == iid for x in actors):
             rd.fail(f"{w}.instance_id", f"duplicate instance id {iid}")
-        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid, recorded))
+        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid, recorded, tracked))
     return actors
 
 

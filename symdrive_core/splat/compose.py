@@ -2,11 +2,12 @@
 
 Each actor layer is moved by its pose (vehicle-local -> world): ``mu_w = R mu_l + T``,
 ``q_w = q_R (x) q_l``; its SH is evaluated with the view direction in the actor's LOCAL frame,
-``d_l = R^T (mu_w - c) = mu_l + R^T (T - c)`` (exact; no SH rotation needed). Positions are formed
-relative to the camera centre in float64, so large world coordinates keep their precision. An actor
-whose padded local box falls outside the view frustum is culled before projection. Each actor's
-Gaussians carry its group index, so the rasterizer accumulates the actor's ``alpha_i T_i`` as an
-instance channel in the same pass. :func:`symdrive_core.splat.render.render_layers` renders the result.
+``d_l = R^T (mu_w - c) = mu_l + R^T (T - c)`` (exact; no SH rotation needed). The pose stays in
+the autograd graph (means, orientations, view directions), so a learnt pose correction gets the
+image's gradient. Positions are formed relative to the camera centre in float64, so large world
+coordinates keep their precision. An actor whose padded local box falls outside the view frustum is
+culled before projection. Each actor's Gaussians carry its group index, so the rasterizer
+accumulates the actor's ``alpha_i T_i`` as an instance channel in the same pass. :func:`symdrive_core.splat.render.render_layers` renders the result.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 import torch
 
 from ..conventions import FAR_PLANE, NEAR_PLANE
-from ..rotations import matrix_to_quat, quat_multiply
+from ..rotations import matrix_to_quat
 from ..scene.visibility import box_corners_world, box_in_frustum
 from .projection import camera_center
 from .sh import sh_to_color
@@ -48,11 +49,33 @@ class Composed:
     dtype: torch.dtype  # the layers' storage dtype
 
 
+def _left_product(q: torch.Tensor) -> torch.Tensor:
+    """[4, 4] ``L`` with ``q (x) p = L @ p`` (Hamilton, wxyz): linear in ``q``."""
+    w, x, y, z = q
+    return torch.stack([torch.stack([w, -x, -y, -z]), torch.stack([x, w, -z, y]),
+                        torch.stack([y, z, w, -x]), torch.stack([z, -y, x, w])])
+
+
+def rotation_quat(R: torch.Tensor) -> torch.Tensor:
+    """[4] wxyz quaternion of the rotation ``R`` [3, 3] (float64), in the graph of ``R``: a learnt
+    pose's gradient reaches it through the Gaussians' orientations too. The value is
+    ``matrix_to_quat`` of ``R`` (Shepperd, any rotation); the gradient comes from the quaternion of
+    ``R0^T R`` (``R0`` = ``R`` detached), the identity in value, where the trace branch is exact."""
+    R0 = R.detach()
+    q0 = torch.as_tensor(matrix_to_quat(R0.cpu().numpy()), dtype=R.dtype, device=R.device)
+    if not R.requires_grad:
+        return q0
+    D = R0.T @ R
+    w = 0.5 * torch.sqrt(1.0 + torch.trace(D))
+    dq = torch.stack([w, (D[2, 1] - D[1, 2]) / (4 * w), (D[0, 2] - D[2, 0]) / (4 * w), (D[1, 0] - D[0, 1]) / (4 * w)])
+    return _left_product(q0) @ dq
+
+
 def rotate_quats(R: torch.Tensor, quats: torch.Tensor) -> torch.Tensor:
-    """``q_R (x) q`` for every row of ``quats``: one 4x4 matrix (linear in ``q``, so gradients reach it)."""
-    q_r = matrix_to_quat(R.detach().to(torch.float64).cpu().numpy())
-    left = quat_multiply(q_r[None], np.eye(4))  # row k = q_R (x) e_k
-    return quats @ torch.as_tensor(left, dtype=quats.dtype, device=quats.device)
+    """``q_R (x) q`` for every row of ``quats``: one 4x4 matrix (linear in ``q``, so gradients reach
+    it, and ``R``'s when it carries them)."""
+    left = _left_product(rotation_quat(torch.as_tensor(R, dtype=torch.float64)))
+    return quats @ left.T.to(dtype=quats.dtype, device=quats.device)
 
 
 def compose_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int, *,
@@ -75,13 +98,14 @@ def compose_layers(layers: list[Layer], viewmat: torch.Tensor, K: torch.Tensor, 
             actor_ids.append(aid)
         if len(g) == 0:
             continue
-        R = None if layer.rotation is None else layer.rotation.detach().to(torch.float64).cpu()
+        # float64 and in the graph: a pose being learnt gets its gradient from the image
+        R = None if layer.rotation is None else layer.rotation.to(torch.float64).cpu()
         T = (torch.zeros(3, dtype=torch.float64) if layer.translation is None
-             else layer.translation.detach().to(torch.float64).cpu())
+             else layer.translation.to(torch.float64).cpu())
         if cull and aid != 0:
             lo, hi = g.local_bounds()
-            corners = box_corners_world(lo.numpy(), hi.numpy(), np.eye(3) if R is None else R.numpy(),
-                                        T.numpy())
+            corners = box_corners_world(lo.numpy(), hi.numpy(), np.eye(3) if R is None else R.detach().numpy(),
+                                        T.detach().numpy())
             if not box_in_frustum(corners, viewmat.detach().double().cpu().numpy(), Kn, width, height, near, far):
                 culled.append(aid)
                 continue
