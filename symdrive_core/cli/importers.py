@@ -381,6 +381,14 @@ def _kitti_raw_report(extended: dict) -> None:
         skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
         print(f"tracklets: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
               f"({tracks['outside']} in frames not imported); types skipped: {skipped}")
+        _bad_tracks_warning(tracks["reported"])
+
+
+def _bad_tracks_warning(reported: list[dict]) -> None:
+    """One warning line naming every box the tracks import reported (actor and frame)."""
+    if reported:
+        print(f"warning: {len(reported)} tracked box(es) are not a plausible motion (the reconstruction does not "
+              f"smooth its pose corrections across them): {'; '.join(r['message'] for r in reported)}", file=sys.stderr)
 
 
 def _lidar_report(lidar: list[dict]) -> None:
@@ -504,4 +512,5 @@ def _tracks(args) -> int:
           f"{info['boxes']} boxes; {info['outside']} boxes outside the package's frames 0..{info['frames'] - 1} "
           f"({info['tracks_outside']} tracks with none inside, not added); types skipped: {skipped} "
           f"({time.perf_counter() - t0:.1f} s)")
+    _bad_tracks_warning(info["reported"])
     return 0

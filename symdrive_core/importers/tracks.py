@@ -62,6 +62,7 @@ from ..scene.poses import Pose
 from .calib_text import finite_numbers
 from .kitti import camera_offset
 from .similarity import decompose
+from .track_checks import TrackChecks, check_track, in_view
 
 TRACK_FORMATS = ("json", "kitti")
 TRACK_FRAMES = ("world", "source", "camera")
@@ -78,6 +79,8 @@ class TracksConfig:
     types: tuple[str, ...] = ("Car", "Van", "Truck")
     # A box's frame minus this is its package frame.
     frame_offset: int = 0
+    # What a track's consecutive boxes may do before a frame is reported (a jump, a turn, ...).
+    checks: TrackChecks = TrackChecks()
 
 
 @dataclass
@@ -86,6 +89,7 @@ class Box:
     centre: np.ndarray  # [3] box centre in the tracks' frame
     rotation: np.ndarray  # [3, 3] the 3DRealCar axes in the tracks' frame
     where: str  # the field, for messages
+    wlh: np.ndarray | None = None  # the box's own size where the tracks give one per box (KITTI)
 
 
 @dataclass
@@ -294,8 +298,8 @@ def read_kitti_labels(path: Path, types: tuple[str, ...] = TracksConfig.types) -
     tracks = []
     for tid, rows in labels.items():
         h, w, length = np.median(np.stack([r.hwl for r in rows]), axis=0)
-        boxes = [Box(r.frame, *_from_kitti_axes(r.bottom, _kitti_r_y(r.rotation_y), h), f"line {r.line}")
-                 for r in rows]
+        boxes = [Box(r.frame, *_from_kitti_axes(r.bottom, _kitti_r_y(r.rotation_y), h), f"line {r.line}",
+                     r.hwl[[1, 2, 0]]) for r in rows]
         first = f"line {rows[0].line}"
         tracks.append(Track(f"track_{tid}", np.array([w, length, h]), boxes, first, (first,) * 3))
     return Tracks(path, "camera", tracks, dict(skipped))
@@ -423,15 +427,18 @@ def import_tracks(package, tracks_file, *, fmt: str | None = None, camera: str |
     m = load_manifest(package)
     tracks = read_tracks(tracks_file, fmt, config)
     offset = None if calib is None else read_camera_offset(calib)
-    return add_tracks(m, tracks, camera=camera, offset=offset, replace=replace, frame_offset=config.frame_offset)
+    return add_tracks(m, tracks, camera=camera, offset=offset, replace=replace, frame_offset=config.frame_offset,
+                      checks=config.checks)
 
 
 def add_tracks(m, tracks: Tracks, *, camera: str | None = None, offset: np.ndarray | None = None,
-               replace: bool = False, frame_offset: int = 0) -> dict:
+               replace: bool = False, frame_offset: int = 0, checks: TrackChecks = TrackChecks()) -> dict:
     """Add ``tracks`` to the loaded package ``m`` as ``existing`` actors and save its manifest
     (atomically, after the whole result has been checked as a manifest). ``offset``: where the
     package camera sits in the frame of boxes given in camera coordinates (KITTI's camera 2 in
-    camera 0's). ``replace``: tracks may replace actors of kind ``existing`` with the same id."""
+    camera 0's). ``replace``: tracks may replace actors of kind ``existing`` with the same id.
+    Boxes that are no plausible motion are reported (:mod:`.track_checks`), in the summary and in
+    ``source.tracks`` with the ids of the actors whose boxes came from tracks."""
     to_world = _frame_to_world(m, tracks, camera, offset)
     nf = len(m.frames)
     new, outside, empty = [], 0, 0
@@ -443,8 +450,29 @@ def add_tracks(m, tracks: Tracks, *, camera: str | None = None, offset: np.ndarr
         else:
             new.append((track, poses, wlh))
     replaced = _place(m, tracks, new, replace)
+    reported = _record(m, [_check(m, track, poses, wlh, frame_offset, checks) for track, poses, wlh in new])
     parse_manifest(m.to_json(), m.path or m.root / "manifest.json")
     m.save()
     return {"package": str(m.root), "tracks": len(new), "replaced": replaced,
             "boxes": sum(p is not None for _, poses, _ in new for p in poses), "outside": outside,
-            "tracks_outside": empty, "frames": nf, "skipped": tracks.skipped}
+            "tracks_outside": empty, "frames": nf, "skipped": tracks.skipped, "reported": reported}
+
+
+def _check(m, track: Track, poses: list, wlh: np.ndarray, frame_offset: int, checks: TrackChecks) -> tuple:
+    """(actor id, reports) of one imported track."""
+    seen = [p is not None and in_view(m, p, wlh, f) for f, p in enumerate(poses)]
+    sizes = {b.frame - frame_offset: b.wlh for b in track.boxes if b.wlh is not None}
+    times = [f.timestamp for f in m.frames]
+    return track.id, check_track(track.id, poses, times, seen, sizes, checks)
+
+
+def _record(m, checked: list[tuple]) -> list[dict]:
+    """Note in ``m.source["tracks"]`` which actors' boxes came from tracks (their poses are refined
+    by the reconstruction by default) and what was reported about them, replacing an earlier
+    import's notes of the same actors. Returns this import's reports."""
+    ids = {actor for actor, _ in checked}
+    notes = m.source.get("tracks", {})
+    reports = [r.to_json() for _, found in checked for r in found]
+    m.source["tracks"] = {"actors": sorted(set(notes.get("actors", [])) | ids),
+                          "reported": [r for r in notes.get("reported", []) if r["actor"] not in ids] + reports}
+    return reports
