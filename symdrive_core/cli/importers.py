@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from functools import partial
 
 from ..importers.frames import DEFAULT_CAMERA, DEFAULT_FPS
 from ..importers.kitti360 import Kitti360Config
@@ -352,9 +353,6 @@ def _kitti(args) -> int:
 def _kitti_raw(args) -> int:
     from dataclasses import replace
 
-    import numpy as np
-
-    from ..importers.ground import path_up
     from ..importers.kitti_raw import read_kitti_raw
     from . import given
 
@@ -366,22 +364,38 @@ def _kitti_raw(args) -> int:
     if src.points is None:
         print("note: no velodyne_points/data: no LiDAR depth; the ground comes from points triangulated from the "
               "images", flush=True)
-    # OXTS poses are metric. Without LiDAR points the ground's plane is the one the path rides on.
+    return _finish_metric(src, args, t0, opt, drive.extend,
+                          partial(_drive_report, boxes="tracklets", outside="in frames not imported", kinds="types"))
+
+
+def _finish_metric(src, args, t0, opt, extend, report) -> int:
+    """:func:`_finish` for a drive recorded with metric poses (OXTS, KITTI-360's world): scale 1
+    unless --scale says otherwise, and without LiDAR points the ground's plane is the one the
+    camera path rides on."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from ..importers.ground import path_up
+
     c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
     up = opt.up or (None if src.points is not None else tuple(path_up(c2ws).tolist()))
-    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up), extend=drive.extend,
-                   report=_kitti_raw_report)
+    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up), extend=extend, report=report)
 
 
-def _kitti_raw_report(extended: dict) -> None:
-    """What a KITTI raw drive's LiDAR and tracklets added to the package."""
+def _drive_report(extended: dict, boxes: str, outside: str | None, kinds: str) -> None:
+    """What a recorded drive's LiDAR and boxes added to the package, in the drive's own words:
+    ``boxes`` where the boxes came from, ``outside`` what those in no imported frame are (None:
+    the reader keeps none), ``kinds`` what the classes left out are called."""
     _lidar_report(extended["lidar"])
     tracks = extended["tracks"]
-    if tracks is not None:
-        skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
-        print(f"tracklets: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
-              f"({tracks['outside']} in frames not imported); types skipped: {skipped}")
-        _bad_tracks_warning(tracks["reported"])
+    if tracks is None:
+        return
+    skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
+    held = "" if outside is None else f" ({tracks['outside']} {outside})"
+    print(f"{boxes}: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes{held}; {kinds} "
+          f"skipped: {skipped}")
+    _bad_tracks_warning(tracks["reported"])
 
 
 def _bad_tracks_warning(reported: list[dict]) -> None:
@@ -409,24 +423,12 @@ def _nuscenes(args) -> int:
     scene = read_nuscenes(args.dataroot, args.scene, config, splats=args.splats, progress=not args.quiet)
     # nuScenes' global frame is metric; the ground is fitted to the LiDAR's returns.
     return _finish(scene.source, args, t0, options=replace(opt, scale=opt.scale or 1.0), extend=scene.extend,
-                   report=_nuscenes_report)
-
-
-def _nuscenes_report(extended: dict) -> None:
-    """What a nuScenes scene's LiDAR and annotations added to the package."""
-    _lidar_report(extended["lidar"])
-    tracks = extended["tracks"]
-    skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
-    print(f"annotations: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes; categories "
-          f"skipped: {skipped}")
+                   report=partial(_drive_report, boxes="annotations", outside=None, kinds="categories"))
 
 
 def _kitti360(args) -> int:
     from dataclasses import replace
 
-    import numpy as np
-
-    from ..importers.ground import path_up
     from ..importers.kitti360 import read_kitti360
     from . import given
 
@@ -444,21 +446,9 @@ def _kitti360(args) -> int:
               f"{', '.join(src.notes['frames_without_pose_first'])})", flush=True)
     if src.points is None:
         print("note: no data_3d_raw velodyne scans: no LiDAR depth; the ground's plane is the camera path's", flush=True)
-    # KITTI-360's world is metric. Without LiDAR points the ground's plane is the one the path rides on.
-    c2ws = np.stack([v.c2w for v in src.grouped.table[0]])
-    up = opt.up or (None if src.points is not None else tuple(path_up(c2ws).tolist()))
-    return _finish(src, args, t0, options=replace(opt, scale=opt.scale or 1.0, up=up), extend=seq.extend,
-                   report=_kitti360_report)
-
-
-def _kitti360_report(extended: dict) -> None:
-    """What a KITTI-360 sequence's LiDAR and 3D boxes added to the package."""
-    _lidar_report(extended["lidar"])
-    tracks = extended["tracks"]
-    if tracks is not None:
-        skipped = ", ".join(f"{kind} {n}" for kind, n in sorted(tracks["skipped"].items())) or "none"
-        print(f"3D boxes: {tracks['tracks']} vehicle(s) as existing actors, {tracks['boxes']} boxes "
-              f"({tracks['outside']} box(es) in no imported frame); classes skipped: {skipped}")
+    return _finish_metric(src, args, t0, opt, seq.extend,
+                          partial(_drive_report, boxes="3D boxes", outside="box(es) in no imported frame",
+                                  kinds="classes"))
 
 
 def _gs(args) -> int:
