@@ -1,8 +1,8 @@
 """Numbers in the text files that come with a recorded drive (calibration, poses, timestamps).
 
 One reader for KITTI's calibration files, poses and ``times.txt`` and for a LiDAR's
-sensor-to-camera transform, so a malformed line is refused the same way everywhere: naming the
-file and the entry.
+sensor-to-camera transform, so a malformed line, or a transform that is no rigid motion, is
+refused the same way everywhere: naming the file and the entry.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import conventions
 from ..errors import InputError
 
 _LABEL = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?::|\s)(.*)$")
@@ -30,6 +31,20 @@ def finite_numbers(text: str, count: int | tuple[int, ...], path: Path, where: s
     if len(v) not in counts or not np.isfinite(v).all():
         raise InputError(path, f"expected {expected} finite numbers, got {len(v)}", where)
     return v
+
+
+def rigid_transform(values: np.ndarray, path: Path, where: str) -> np.ndarray:
+    """A 4x4 from row-major numbers: a 3x3 rotation (9), ``[R | t]`` (12) or a whole 4x4 (16),
+    checked rigid (an :class:`InputError` naming ``path`` and ``where`` otherwise)."""
+    T = np.eye(4)
+    if len(values) == 9:
+        T[:3, :3] = values.reshape(3, 3)
+    else:
+        T[: len(values) // 4] = values.reshape(-1, 4)
+    if not conventions.is_rigid(T):
+        last_row = "; last row 0 0 0 1" if len(values) == 16 else ""
+        raise InputError(path, f"not a rigid transform (rotation must be orthonormal, det +1{last_row})", where)
+    return T
 
 
 def labelled_lines(lines: list[str]) -> list[tuple[str | None, str]]:

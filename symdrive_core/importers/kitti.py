@@ -24,11 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import conventions
 from ..errors import InputError
 from .calib_text import finite_numbers, labelled_lines
 from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
-from .kitti_calib import camera_offset, projection
+from .kitti_calib import camera_offset, package_intrinsics, projection
 from .package import Source
 from .stereo import RigTolerance, check_pair
 
@@ -131,8 +130,7 @@ def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats:
         frames = _frames(sequence / folder)
         first = frames[min(frames)]
         width, height, _ = image_size(first, folder)
-        rig.append((cam, label, conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5), offset,
-                    frames, width, height))
+        rig.append((cam, label, package_intrinsics(P), offset, frames, width, height))
     if right is not None:
         _check_rig(rig, folders, calib_path)
     views = []

@@ -45,11 +45,11 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..scene.paths import check_name
-from .calib_text import finite_numbers, read_small_text
+from .calib_text import finite_numbers, read_small_text, rigid_transform
 from .frames import DEFAULT_FPS, View, group_views
 from .kitti360_boxes import DEFAULT_TYPES, Kitti360Box, box_tracks, read_boxes
-from .kitti_calib import labels_of, projection
-from .kitti_raw import camera_frames, camera_name, frame_times, labelled_numbers
+from .kitti_calib import labelled_rigid, read_labels, rectified_camera
+from .kitti_raw import camera_frames, camera_name, frame_times
 from .lidar import LidarConfig, list_scans, seen_returns
 from .package import Source
 
@@ -93,35 +93,19 @@ class Camera:
 # ---------------------------------------------------------------- calibration
 
 
-def _labels(path: Path) -> dict[str, str]:
-    return labels_of(read_small_text(path, "calibration"))
-
-
-def _rigid(values: np.ndarray, path: Path, where: str) -> np.ndarray:
-    """A 4x4 from a row-major 3x3 rotation (9 numbers), 3x4 or 4x4, checked rigid."""
-    T = np.eye(4)
-    if len(values) == 9:
-        T[:3, :3] = values.reshape(3, 3)
-    else:
-        T[: len(values) // 4] = values.reshape(-1, 4)
-    if not conventions.is_rigid(T):
-        raise InputError(path, "not a rigid transform (rotation orthonormal, det +1; last row 0 0 0 1)", where)
-    return T
-
-
 def _camera_to_pose(path: Path, cameras: tuple[int, ...]) -> dict[int, np.ndarray]:
     """Unrectified camera i -> the system pose, from ``calib_cam_to_pose.txt``'s ``image_0i:`` lines."""
     if not path.is_file():
         raise InputError(path, "file not found (the cameras' places on the vehicle: needed for camera 1 and for "
                          f"{POSES} without {CAM0_TO_WORLD})", "calibration")
-    labels = _labels(path)
-    return {i: _rigid(labelled_numbers(labels, camera_name(i), 12, path), path, camera_name(i)) for i in cameras}
+    labels = read_labels(path)
+    return {i: labelled_rigid(labels, path, camera_name(i), 12) for i in cameras}
 
 
 def _camera0_to_velo(path: Path) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, "file not found (camera 0 to the Velodyne: needed for the scans)", "calibration")
-    return _rigid(finite_numbers(read_small_text(path, "calibration"), 12, path, "line 1"), path, "line 1")
+    return rigid_transform(finite_numbers(read_small_text(path, "calibration"), 12, path, "line 1"), path, "line 1")
 
 
 def read_rig(calibration: Path, cameras: tuple[int, ...], *, poses_only: bool, scans: bool
@@ -130,9 +114,8 @@ def read_rig(calibration: Path, cameras: tuple[int, ...], *, poses_only: bool, s
     pose or None when not needed). ``poses_only``: the sequence has ``poses.txt`` alone;
     ``scans``: the Velodyne is to be composed to each camera."""
     persp_path = calibration / PERSPECTIVE
-    persp = _labels(persp_path)
-    rects = {i: _rigid(labelled_numbers(persp, f"R_rect_{i:02d}", 9, persp_path), persp_path, f"R_rect_{i:02d}")
-             for i in sorted({0, *cameras})}
+    persp = read_labels(persp_path)
+    rects = {i: labelled_rigid(persp, persp_path, f"R_rect_{i:02d}", 9) for i in sorted({0, *cameras})}
     pose_from_rect0, to_pose = None, None
     if poses_only or cameras != (0,):
         to_pose = _camera_to_pose(calibration / CAM_TO_POSE, tuple(sorted({0, *cameras})))
@@ -142,19 +125,11 @@ def read_rig(calibration: Path, cameras: tuple[int, ...], *, poses_only: bool, s
         rect0_from_velo = rects[0] @ conventions.invert_rigid(_camera0_to_velo(calibration / CAM_TO_VELO))
     rig = {}
     for i in cameras:
-        key = f"P_rect_{i:02d}"
-        if key not in persp:
-            raise InputError(persp_path, f"no {key} line (KITTI-360 camera {i}'s projection)", key)
-        P = projection(persp[key], persp_path, key)
-        size = labelled_numbers(persp, f"S_rect_{i:02d}", 2, persp_path)
-        if not np.all((size >= 1) & (size == np.round(size))):
-            raise InputError(persp_path, f"expected an image size in whole pixels, got {size.tolist()}",
-                             f"S_rect_{i:02d}")
+        K, width, height = rectified_camera(persp, persp_path, i, f"KITTI-360 camera {i}")
         rect0_from_cam = np.eye(4) if i == 0 else \
             conventions.invert_rigid(pose_from_rect0) @ to_pose[i] @ conventions.invert_rigid(rects[i])
         velo = None if rect0_from_velo is None else conventions.invert_rigid(rect0_from_cam) @ rect0_from_velo
-        K = conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5)
-        rig[i] = Camera(i, K, int(size[0]), int(size[1]), rect0_from_cam, velo)
+        rig[i] = Camera(i, K, width, height, rect0_from_cam, velo)
     return rig, pose_from_rect0
 
 
@@ -176,7 +151,7 @@ def read_poses(path: Path, count: int) -> dict[int, tuple[np.ndarray, int]]:
         frame = int(words[0])
         if frame in out:
             raise InputError(path, f"frame {frame} has a pose already (line {out[frame][1]})", where)
-        out[frame] = (_rigid(finite_numbers(" ".join(words[1:]), count, path, where), path, where), n)
+        out[frame] = (rigid_transform(finite_numbers(" ".join(words[1:]), count, path, where), path, where), n)
     if not out:
         raise InputError(path, "no poses", "line 1")
     return out

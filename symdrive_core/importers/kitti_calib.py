@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .calib_text import finite_numbers, labelled_lines, read_small_text
+from .calib_text import finite_numbers, labelled_lines, read_small_text, rigid_transform
 
 REFERENCE_CAMERA = 0  # the camera every KITTI Velodyne transform ends in
 CAMERAS = (0, 1, 2, 3)
@@ -51,6 +51,12 @@ def projection(text: str, path: Path, label: str) -> np.ndarray:
     return P
 
 
+def package_intrinsics(P: np.ndarray) -> np.ndarray:
+    """The package K [3, 3] of a rectified projection ``P = K [I | t]``: KITTI puts pixel centres at
+    integer coordinates, the package at +0.5."""
+    return conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5)
+
+
 def camera_offset(P: np.ndarray) -> np.ndarray:
     """Where the camera of ``P = K [I | t]`` sits in camera 0's frame: ``-t``."""
     return -np.linalg.solve(P[:, :3], P[:, 3])
@@ -61,27 +67,51 @@ def labels_of(text: str) -> dict[str, str]:
     return {label: rest for label, rest in labelled_lines(text.splitlines()) if label is not None}
 
 
+def read_labels(path: Path, field: str = "calibration") -> dict[str, str]:
+    """:func:`labels_of` a calibration file (``field`` names it in a message about its size)."""
+    return labels_of(read_small_text(path, field))
+
+
+def labelled_numbers(labels: dict[str, str], key: str, count, path: Path) -> np.ndarray:
+    """The ``count`` numbers of line ``key`` of a calibration file's ``labels`` (a missing line named)."""
+    if key not in labels:
+        raise InputError(path, f"no {key} line", key)
+    return finite_numbers(labels[key], count, path, key)
+
+
+def labelled_rigid(labels: dict[str, str], path: Path, label: str, counts) -> np.ndarray:
+    """A 4x4 from a labelled 3x3 rotation (9 numbers) or 3x4 ``[R | t]`` (12), checked rigid."""
+    return rigid_transform(labelled_numbers(labels, label, counts, path), path, label)
+
+
+def raw_rigid(labels: dict[str, str], path: Path) -> np.ndarray:
+    """The 4x4 of a KITTI raw calibration file's ``R`` (9 numbers) and ``T`` (3) lines: the layout
+    of ``calib_velo_to_cam.txt`` and ``calib_imu_to_velo.txt``."""
+    T = labelled_rigid(labels, path, "R", 9)
+    T[:3, 3] = labelled_numbers(labels, "T", 3, path)
+    return T
+
+
+def rectified_camera(labels: dict[str, str], path: Path, i: int, camera: str) -> tuple[np.ndarray, int, int]:
+    """(the package K [3, 3], width, height) of rectified camera ``i`` from the ``P_rect_0i`` and
+    ``S_rect_0i`` lines of KITTI raw's ``calib_cam_to_cam.txt`` or KITTI-360's ``perspective.txt``
+    (one layout); ``camera`` names it in a message (``KITTI camera 2``)."""
+    key = f"P_rect_{i:02d}"
+    if key not in labels:
+        raise InputError(path, f"no {key} line ({camera}'s projection)", key)
+    P = projection(labels[key], path, key)
+    size = labelled_numbers(labels, f"S_rect_{i:02d}", 2, path)
+    if not np.all((size >= 1) & (size == np.round(size))):
+        raise InputError(path, f"expected an image size in whole pixels, got {size.tolist()}", f"S_rect_{i:02d}")
+    return package_intrinsics(P), int(size[0]), int(size[1])
+
+
 def layout_of(labels: dict[str, str]) -> str | None:
     """Which KITTI layout a calibration file's labels are, or None (no Velodyne transform in it)."""
     for layout, (velo, _) in LAYOUTS.items():
         if velo in labels:
             return layout
     return "raw" if "R" in labels and "T" in labels else None
-
-
-def _rigid(labels: dict[str, str], path: Path, label: str, counts) -> np.ndarray:
-    """A 4x4 from a labelled 3x3 rotation (9 numbers) or 3x4 ``[R | t]`` (12)."""
-    if label not in labels:
-        raise InputError(path, f"no {label} line", label)
-    v = finite_numbers(labels[label], counts, path, label)
-    T = np.eye(4)
-    if len(v) == 9:
-        T[:3, :3] = v.reshape(3, 3)
-    else:
-        T[:3] = v.reshape(3, 4)
-    if not conventions.is_rigid(T):
-        raise InputError(path, "not a rigid transform (rotation must be orthonormal, det +1)", label)
-    return T
 
 
 def velo_to_camera(path: Path, labels: dict[str, str], camera: int) -> tuple[np.ndarray, str]:
@@ -92,18 +122,17 @@ def velo_to_camera(path: Path, labels: dict[str, str], camera: int) -> tuple[np.
     layout = layout_of(labels)
     if layout == "raw":
         velo_label, rect_label, p_label = "R, T", "R_rect_00", f"P_rect_0{camera}"
-        velo = _rigid(labels, path, "R", 9)
-        velo[:3, 3] = finite_numbers(labels["T"], 3, path, "T")
+        velo = raw_rigid(labels, path)
         rect_path = path.parent / RAW_CAM_TO_CAM
         if not rect_path.exists():
             raise InputError(rect_path, "file not found: R and T end in camera 0 before rectification, and "
                              "its rectification and projections are in this file beside them", rect_label)
-        rect_labels = labels_of(read_small_text(rect_path, rect_label))
+        rect_labels = read_labels(rect_path, rect_label)
     else:
         (velo_label, rect_label), p_label = LAYOUTS[layout], f"P{camera}"
-        velo = _rigid(labels, path, velo_label, 12)
+        velo = labelled_rigid(labels, path, velo_label, 12)
         rect_path, rect_labels = path, labels
-    T = velo if rect_label is None else _rigid(rect_labels, rect_path, rect_label, (9, 12)) @ velo
+    T = velo if rect_label is None else labelled_rigid(rect_labels, rect_path, rect_label, (9, 12)) @ velo
     if p_label in rect_labels:
         offset = camera_offset(projection(rect_labels[p_label], rect_path, p_label))
     elif camera == REFERENCE_CAMERA:

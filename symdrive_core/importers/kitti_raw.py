@@ -34,10 +34,9 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .calib_text import finite_numbers, read_small_text
 from .frames import DEFAULT_FPS, View, group_views
-from .kitti_calib import RAW_CAM_TO_CAM, labels_of, layout_of, projection, velo_to_camera
-from .lidar import LidarConfig, list_scans, read_scan
+from .kitti_calib import RAW_CAM_TO_CAM, layout_of, raw_rigid, read_labels, rectified_camera, velo_to_camera
+from .lidar import LidarConfig, list_scans, seen_returns
 from .oxts import imu_poses, read_record
 from .package import Source
 from .tracklets import Tracklet, read_tracklets
@@ -70,28 +69,6 @@ def camera_name(i: int) -> str:
 # ---------------------------------------------------------------- calibration
 
 
-def _labels(path: Path) -> dict[str, str]:
-    return labels_of(read_small_text(path, "calibration"))
-
-
-def labelled_numbers(labels: dict[str, str], key: str, count: int, path: Path) -> np.ndarray:
-    """The ``count`` numbers of line ``key`` of a calibration file's ``labels`` (a missing line named)."""
-    if key not in labels:
-        raise InputError(path, f"no {key} line", key)
-    return finite_numbers(labels[key], count, path, key)
-
-
-def _imu_to_velo(path: Path) -> np.ndarray:
-    """The IMU -> Velodyne transform of ``calib_imu_to_velo.txt`` (``R``: 9 numbers, ``T``: 3)."""
-    labels = _labels(path)
-    T = np.eye(4)
-    T[:3, :3] = labelled_numbers(labels, "R", 9, path).reshape(3, 3)
-    T[:3, 3] = labelled_numbers(labels, "T", 3, path)
-    if not conventions.is_rigid(T):
-        raise InputError(path, "not a rotation (orthonormal, det +1)", "R")
-    return T
-
-
 @dataclass
 class Camera:
     """One rectified KITTI camera: its package K, image size and where it sits on the rig."""
@@ -107,23 +84,16 @@ class Camera:
 def read_calibration(date_dir: Path, cameras: tuple[int, ...]) -> dict[int, Camera]:
     """The rig of ``cameras`` from the date folder's three calibration files."""
     rect_path, velo_path = date_dir / RAW_CAM_TO_CAM, date_dir / CALIB_VELO_TO_CAM
-    rect, velo = _labels(rect_path), _labels(velo_path)
+    rect, velo = read_labels(rect_path), read_labels(velo_path)
     if layout_of(velo) != "raw":
         raise InputError(velo_path, "no R and T lines (the Velodyne to camera 0 before rectification)", "R")
-    imu_to_velo = _imu_to_velo(date_dir / CALIB_IMU_TO_VELO)
+    imu_path = date_dir / CALIB_IMU_TO_VELO
+    imu_to_velo = raw_rigid(read_labels(imu_path), imu_path)
     out = {}
     for i in cameras:
-        key = f"P_rect_{i:02d}"
-        if key not in rect:
-            raise InputError(rect_path, f"no {key} line (KITTI camera {i}'s projection)", key)
-        P = projection(rect[key], rect_path, key)
-        size = labelled_numbers(rect, f"S_rect_{i:02d}", 2, rect_path)
-        if not np.all((size >= 1) & (size == np.round(size))):
-            raise InputError(rect_path, f"expected an image size in whole pixels, got {size.tolist()}",
-                             f"S_rect_{i:02d}")
+        K, width, height = rectified_camera(rect, rect_path, i, f"KITTI camera {i}")
         velo_to_cam, _ = velo_to_camera(velo_path, velo, i)
-        K = conventions.intrinsics(P[0, 0], P[1, 1], P[0, 2] + 0.5, P[1, 2] + 0.5)
-        out[i] = Camera(i, K, int(size[0]), int(size[1]), velo_to_cam, velo_to_cam @ imu_to_velo)
+        out[i] = Camera(i, K, width, height, velo_to_cam, velo_to_cam @ imu_to_velo)
     return out
 
 
@@ -224,30 +194,6 @@ class KittiRawDrive:
         return {"lidar": lidar, "tracks": tracks}
 
 
-def _lidar_points(scans: list[Path], world_from_velo: np.ndarray, cam: Camera, images: list[Path],
-                  config: KittiRawConfig) -> tuple[np.ndarray, np.ndarray]:
-    """(points [N, 3] in the source frame, colours [N, 3]): per scan an even share of
-    ``config.lidar_points`` of the returns that land in the camera's image, coloured there."""
-    from ..io.images import read_image
-
-    rng = np.random.default_rng(0)
-    share = -(-config.lidar_points // len(scans))
-    points, colors = [], []
-    for scan, image, w_velo in zip(scans, images, world_from_velo):
-        p = read_scan(scan)
-        uv, z = conventions.project_points(p, cam.velo_to_camera, cam.K)
-        with np.errstate(invalid="ignore"):
-            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
-            seen = (z >= config.lidar.min_depth_m) & (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)
-        keep = np.flatnonzero(seen)
-        if len(keep) > share:
-            keep = np.sort(rng.choice(keep, share, replace=False))
-        rgb = read_image(image, channels=3)
-        colors.append(rgb[row[keep].astype(np.int64), col[keep].astype(np.int64)])
-        points.append(p[keep] @ w_velo[:3, :3].T + w_velo[:3, 3])
-    return np.concatenate(points), np.concatenate(colors).astype(np.float64)
-
-
 def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(), *, splats=None,
                    fps: float = DEFAULT_FPS, progress: bool = True) -> KittiRawDrive:
     """Read and check a whole drive (``config.cameras``, OXTS, timestamps, the Velodyne's scans
@@ -287,7 +233,9 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
                              f"/data (frame {missing[0] if missing else '?'}): expected one scan per image, named "
                              "as it", "velodyne_points")
         world_from_velo = world_from_imu @ conventions.invert_rigid(first.imu_to_camera) @ first.velo_to_camera
-        points, colors = _lidar_points(scans, world_from_velo, first, [images[cameras[0]][n] for n in names], config)
+        points, colors = seen_returns(scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K,
+                                      first.width, first.height, [images[cameras[0]][n] for n in names],
+                                      config.lidar_points, config.lidar.min_depth_m)
     tracklets_path = drive / TRACKLETS
     tracklets = read_tracklets(tracklets_path) if tracklets_path.is_file() else None
     g = None

@@ -24,7 +24,7 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..io import check_regular
-from .calib_text import finite_numbers, read_small_text
+from .calib_text import finite_numbers, read_small_text, rigid_transform
 from .frames import natural_key
 from .kitti_calib import CAMERAS, REFERENCE_CAMERA, labels_of, layout_of, velo_to_camera
 
@@ -102,12 +102,7 @@ def read_sensor_to_camera(path: Path, kitti_camera: int | None = None) -> tuple[
     text = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
     count = len(text.replace(",", " ").split())
     v = finite_numbers(text, 16 if count == 16 else 12, path, "transform")
-    T = np.eye(4)
-    T[: len(v) // 4] = v.reshape(-1, 4)
-    if not conventions.is_rigid(T):
-        raise InputError(path, "not a rigid transform (rotation must be orthonormal, det +1; "
-                               "last row 0 0 0 1)", "transform")
-    return T, f"{len(v)} numbers: the transform into the package camera as written"
+    return rigid_transform(v, path, "transform"), f"{len(v)} numbers: the transform into the package camera as written"
 
 
 def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
