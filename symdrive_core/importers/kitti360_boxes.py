@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io import check_regular
 from ..scene.manifest import COORD_MAX, WLH_MAX
+from . import xml_text
 from .calib_text import finite_numbers
 from .tracks import Box, Track, Tracks
 
@@ -54,15 +54,8 @@ class Kitti360Box:
     where: str  # its element, for messages
 
 
-def _text(node: ET.Element, tag: str, path: Path, where: str) -> str:
-    child = node.find(tag)
-    if child is None or child.text is None or not child.text.strip():
-        raise InputError(path, "missing", f"{where}.{tag}")
-    return child.text.strip()
-
-
 def _int(node: ET.Element, tag: str, path: Path, where: str, minimum: int) -> int:
-    text = _text(node, tag, path, where)
+    text = xml_text.text(node, tag, path, where)
     try:
         value = int(text)
     except ValueError:
@@ -81,7 +74,7 @@ def _matrix(node: ET.Element, tag: str, shape: tuple[int, int], path: Path, wher
     rows, cols = _int(m, "rows", path, at, 0), _int(m, "cols", path, at, 0)
     if (rows, cols) != shape:
         raise InputError(path, f"expected a {shape[0]}x{shape[1]} matrix, got {rows}x{cols}", f"{at}.rows")
-    return finite_numbers(_text(m, "data", path, at), rows * cols, path, f"{at}.data").reshape(shape)
+    return finite_numbers(xml_text.text(m, "data", path, at), rows * cols, path, f"{at}.data").reshape(shape)
 
 
 def _box(node: ET.Element, kind: str, semantic: int, path: Path, where: str) -> Kitti360Box:
@@ -119,12 +112,7 @@ def _box(node: ET.Element, kind: str, semantic: int, path: Path, where: str) -> 
 def read_boxes(path: Path, types: tuple[str, ...] = DEFAULT_TYPES) -> tuple[list[Kitti360Box], dict[str, int]]:
     """(the boxes of the classes ``types``, in file order; the other boxes counted by class)."""
     path = Path(path)
-    if check_regular(path, "boxes").st_size > BOXES_BYTES_MAX:
-        raise InputError(path, f"larger than {BOXES_BYTES_MAX} bytes: not a KITTI-360 box file", "boxes")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise InputError(path, f"not valid XML: {exc}", "boxes") from None
+    root = xml_text.parse(path, "boxes", BOXES_BYTES_MAX, "a KITTI-360 box file")
     boxes, skipped = [], {}
     for node in root:
         if node.find("semanticId") is None:

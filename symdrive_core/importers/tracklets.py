@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io import check_regular
 from ..scene.manifest import WLH_MAX
+from . import xml_text
 from .oxts import euler_rotation
 from .tracks import Box, Track, Tracks
 
@@ -38,15 +38,8 @@ class Tracklet:
     where: str  # its element, for messages
 
 
-def _text(node: ET.Element, tag: str, path: Path, where: str) -> str:
-    child = node.find(tag)
-    if child is None or child.text is None or not child.text.strip():
-        raise InputError(path, "missing", f"{where}.{tag}")
-    return child.text.strip()
-
-
 def _number(node: ET.Element, tag: str, path: Path, where: str) -> float:
-    text = _text(node, tag, path, where)
+    text = xml_text.text(node, tag, path, where)
     try:
         value = float(text)
     except ValueError:
@@ -66,7 +59,7 @@ def _items(node: ET.Element, path: Path, where: str) -> list[ET.Element]:
 
 
 def _tracklet(node: ET.Element, path: Path, where: str) -> Tracklet:
-    kind = _text(node, "objectType", path, where)
+    kind = xml_text.text(node, "objectType", path, where)
     wlh = np.array([_number(node, k, path, where) for k in "wlh"])
     for k, v in zip("wlh", wlh):
         if not 0.0 < v <= WLH_MAX:
@@ -88,12 +81,7 @@ def _tracklet(node: ET.Element, path: Path, where: str) -> Tracklet:
 def read_tracklets(path: Path) -> list[Tracklet]:
     """Every tracklet of a ``tracklet_labels.xml``, in file order."""
     path = Path(path)
-    if check_regular(path, "tracklets").st_size > TRACKLETS_BYTES_MAX:
-        raise InputError(path, f"larger than {TRACKLETS_BYTES_MAX} bytes: not a tracklet file", "tracklets")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise InputError(path, f"not valid XML: {exc}", "tracklets") from None
+    root = xml_text.parse(path, "tracklets", TRACKLETS_BYTES_MAX, "a tracklet file")
     node = root if root.tag == "tracklets" else root.find("tracklets")
     if node is None:
         raise InputError(path, "no tracklets element", "tracklets")
