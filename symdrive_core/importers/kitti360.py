@@ -46,10 +46,10 @@ from .. import conventions
 from ..errors import InputError
 from ..scene.paths import check_name
 from .calib_text import finite_numbers, read_small_text, rigid_transform
-from .frames import DEFAULT_FPS, View, group_views
+from .frames import DEFAULT_FPS, group_views
 from .kitti360_boxes import DEFAULT_TYPES, Kitti360Box, box_tracks, read_boxes
 from .kitti_calib import labelled_rigid, read_labels, rectified_camera
-from .kitti_raw import camera_frames, camera_name, frame_times
+from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, rig_views
 from .lidar import LidarConfig, list_scans, seen_returns
 from .package import Source
 
@@ -79,13 +79,9 @@ class Kitti360Config:
 
 
 @dataclass
-class Camera:
+class Camera(RectifiedCamera):
     """One rectified perspective camera: its package K, image size and place on the rig."""
 
-    index: int
-    K: np.ndarray  # [3, 3], package pixel centres (+0.5)
-    width: int
-    height: int
     rect0_from_camera: np.ndarray  # [4, 4] the camera in rectified camera 0's frame
     velo_to_camera: np.ndarray | None  # [4, 4]; None without scans
 
@@ -252,20 +248,11 @@ def read_kitti360(root: str | Path, sequence: str, config: Kitti360Config = Kitt
     if not names:
         raise InputError(pose_path, f"no frame of {first}/{IMAGES} has a pose (frames {int(unposed[0])} to "
                          f"{int(unposed[-1])} have images)", "frame")
-    lines = [posed[int(n)][1] for n in names]
     world_from_rect0 = np.stack([posed[int(n)][0] if rectified else posed[int(n)][0] @ pose_from_rect0
                                  for n in names])
-    views, time_origin = [], None
-    for i in cameras:
-        cam, folder = rig[i], camera_name(i)
-        times = frame_times(seq / folder / "timestamps.txt", names)
-        if times is not None and time_origin is None:
-            time_origin = times[1]
-        for fi, name in enumerate(names):
-            views.append(View(name=f"{folder}/{name}" if len(cameras) > 1 else name, K=cam.K, width=cam.width,
-                              height=cam.height, c2w=world_from_rect0[fi] @ cam.rect0_from_camera, source=pose_path,
-                              where=f"line {lines[fi]} ({folder}/{IMAGES}/{name}.png)", image=images[i][name],
-                              timestamp=None if times is None else times[0][fi]))
+    views, time_origin = rig_views(seq, IMAGES, rig, names, images, world_from_rect0,
+                                   {i: rig[i].rect0_from_camera for i in cameras},
+                                   [(pose_path, posed[int(n)][1]) for n in names])
     grouped = group_views(views, camera_name=first, fps=fps)
     scans, points, colors = None, None, None
     if scans_dir.is_dir():

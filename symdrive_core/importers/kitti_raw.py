@@ -27,15 +27,15 @@ or not at all; every input is read and checked before anything is written.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import DEFAULT_FPS, View, group_views
+from .frames import DEFAULT_FPS, group_views
 from .kitti_calib import RAW_CAM_TO_CAM, layout_of, raw_rigid, read_labels, rectified_camera, velo_to_camera
+from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, rig_views
 from .lidar import LidarConfig, list_scans, seen_returns
 from .oxts import imu_poses, read_record
 from .package import Source
@@ -61,22 +61,13 @@ class KittiRawConfig:
     lidar: LidarConfig = field(default_factory=LidarConfig)
 
 
-def camera_name(i: int) -> str:
-    """A KITTI camera's package name: its folder's (``image_02``)."""
-    return f"image_{i:02d}"
-
-
 # ---------------------------------------------------------------- calibration
 
 
 @dataclass
-class Camera:
+class Camera(RectifiedCamera):
     """One rectified KITTI camera: its package K, image size and where it sits on the rig."""
 
-    index: int
-    K: np.ndarray  # [3, 3], package pixel centres (+0.5)
-    width: int
-    height: int
     velo_to_camera: np.ndarray  # [4, 4]
     imu_to_camera: np.ndarray  # [4, 4]
 
@@ -95,62 +86,6 @@ def read_calibration(date_dir: Path, cameras: tuple[int, ...]) -> dict[int, Came
         velo_to_cam, _ = velo_to_camera(velo_path, velo, i)
         out[i] = Camera(i, K, width, height, velo_to_cam, velo_to_cam @ imu_to_velo)
     return out
-
-
-# ---------------------------------------------------------------- frames, times
-
-
-def camera_frames(drive: Path, cameras: tuple[int, ...], sub: str = "data") -> dict[int, dict[str, Path]]:
-    """Per camera, frame name -> image of ``image_0i/<sub>/``; every camera must hold the same frames."""
-    out: dict[int, dict[str, Path]] = {}
-    for i in cameras:
-        folder = drive / camera_name(i) / sub
-        if not folder.is_dir():
-            raise InputError(folder, f"no images of KITTI camera {i}", "--cameras")
-        out[i] = {p.stem: p for p in folder.iterdir() if p.suffix.lower() == ".png" and p.stem.isdigit()}
-        if not out[i]:
-            raise InputError(folder, "no images named by frame number (0000000000.png, ...)", "images")
-    first = cameras[0]
-    for i in cameras[1:]:
-        missing = sorted(set(out[first]) ^ set(out[i]))
-        if missing:
-            has = camera_name(first) if missing[0] in out[first] else camera_name(i)
-            raise InputError(drive / has / sub / f"{missing[0]}.png", "frame not recorded by every camera chosen "
-                             f"({', '.join(camera_name(c) for c in cameras)})", "--cameras")
-    return out
-
-
-def _clock(text: str, path: Path, where: str) -> tuple[int, float]:
-    """(whole seconds since 1970, the fraction) of a KITTI time ``YYYY-MM-DD HH:MM:SS.fffffffff``;
-    split so nanoseconds survive where a datetime keeps microseconds."""
-    whole, _, frac = text.strip().partition(".")
-    try:
-        t = datetime.strptime(whole, "%Y-%m-%d %H:%M:%S")
-        if frac and not frac.isdigit():
-            raise ValueError
-    except ValueError:
-        raise InputError(path, f"expected a time YYYY-MM-DD HH:MM:SS.fffffffff, got {text.strip()!r}", where) from None
-    return int((t - datetime(1970, 1, 1)).total_seconds()), float(f"0.{frac or 0}")
-
-
-def frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
-    """(seconds since the first of ``names``, that frame's time as written) from a camera's
-    ``timestamps.txt`` (line n: frame n), or None when the camera has none."""
-    if not path.is_file():
-        return None
-    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
-    clocks = []
-    for name in names:
-        n = int(name)
-        if n >= len(lines) or not lines[n].strip():
-            raise InputError(path, f"no time for frame {name}; the file has {len(lines)} lines", f"line {n + 1}")
-        clocks.append(_clock(lines[n], path, f"line {n + 1}"))
-    s0, f0 = clocks[0]
-    times = [float(s - s0) + (f - f0) for s, f in clocks]
-    for name, a, b in zip(names[1:], times, times[1:]):
-        if b <= a:
-            raise InputError(path, f"frame {name}'s time is not after the frame before it", f"line {int(name) + 1}")
-    return times, lines[int(names[0])].strip()
 
 
 # ---------------------------------------------------------------- the drive
@@ -204,24 +139,13 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
         raise InputError(drive, "not a folder (expected a KITTI raw drive, DATE/DATE_drive_NNNN_sync)", "DRIVE_DIR")
     cameras = tuple(config.cameras)
     rig = read_calibration(drive.resolve().parent, cameras)
-    images = camera_frames(drive, cameras)
+    images = camera_frames(drive, cameras, "data")
     names = sorted(images[cameras[0]], key=int)
     oxts = [drive / "oxts" / "data" / f"{name}.txt" for name in names]
     world_from_imu, projection = imu_poses(np.stack([read_record(p) for p in oxts]))
-    views, time_origin = [], None
-    for i in cameras:
-        cam, folder = rig[i], camera_name(i)
-        times = frame_times(drive / folder / "timestamps.txt", names)
-        if times is not None and time_origin is None:
-            time_origin = times[1]
-        cam_from_imu_inv = conventions.invert_rigid(cam.imu_to_camera)
-        for fi, name in enumerate(names):
-            # {camera}/{frame} for a rig, the frame alone for one camera: the package's frame
-            # names are the drive's frame numbers either way (what extend maps tracklets by).
-            views.append(View(name=f"{folder}/{name}" if len(cameras) > 1 else name, K=cam.K, width=cam.width,
-                              height=cam.height, c2w=world_from_imu[fi] @ cam_from_imu_inv, source=oxts[fi],
-                              where=f"line 1 ({folder}/data/{name}.png)", image=images[i][name],
-                              timestamp=None if times is None else times[0][fi]))
+    views, time_origin = rig_views(drive, "data", rig, names, images, world_from_imu,
+                                   {i: conventions.invert_rigid(rig[i].imu_to_camera) for i in cameras},
+                                   [(p, 1) for p in oxts])
     grouped = group_views(views, camera_name=camera_name(cameras[0]), fps=fps)
     first = rig[cameras[0]]
     scans_dir, points, colors = drive / SCANS, None, None
