@@ -16,26 +16,24 @@ from symdrive_core.cli import main
 from symdrive_core.conventions import invert_rigid
 from symdrive_core.importers.kitti360 import read_kitti360
 from symdrive_core.importers.oxts import euler_rotation as rot
-from symdrive_core.io.images import read_image, write_image
+from symdrive_core.io.images import write_image
 from symdrive_core.scene import load_manifest
+
+from . import drives
+from .drives import moved, numbers, rigid
 
 SEQ = "2013_05_28_drive_0000_sync"
 N_FRAMES, UNPOSED = 8, 3  # images 0..7; frame 3 has no pose
 POSED = [k for k in range(N_FRAMES) if k != UNPOSED]
 WIDTH, HEIGHT = 64, 32
 FX, CX, CY = 30.0, 31.5, 15.5  # KITTI-360's pixel centres at integers
+K = np.array([[FX, 0.0, CX], [0.0, FX, CY], [0.0, 0.0, 1.0]])
 BASELINE = 0.6  # rectified camera 1 this far along rectified camera 0's +x
 ORIGIN = np.array([1023.4, 3871.2, 115.6])  # the path's start in the sequence's world (metres, z up)
 GROUND_Z = ORIGIN[2] - 1.9
 CAR_LWH = (4.3, 1.8, 1.5)
 PARKED_LWH = (4.0, 1.7, 1.4)
 TOL_M = 1e-9
-
-
-def rigid(R, t) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
 
 
 # The rectified cameras' axes (x right, y down, z forward) in the system pose's (x forward, y left, z up).
@@ -73,31 +71,17 @@ PARKED = rigid(rot(0.0, 0.0, 0.4 + np.pi), ORIGIN + [14.0, 1.0, GROUND_Z - ORIGI
 
 
 def world_points() -> np.ndarray:
-    """The road ahead and beside the path, and a wall that hides part of it (in the path's frame)."""
-    x, y = np.meshgrid(np.arange(-2.0, 30.0, 0.45), np.arange(-8.0, 8.0, 0.55))
-    road = np.stack([x.ravel(), y.ravel(), np.full(x.size, GROUND_Z - ORIGIN[2])], 1)
-    wy, wz = np.meshgrid(np.arange(-4.0, 0.0, 0.3), np.arange(0.0, 2.0, 0.25))
-    wall = np.stack([np.full(wy.size, 16.0), wy.ravel(), GROUND_Z - ORIGIN[2] + wz.ravel()], 1)
-    return np.concatenate([road, wall]) @ rot(0.0, 0.0, 0.4).T + ORIGIN
+    """The road ahead and beside the path, and a wall that hides part of it (placed along the path)."""
+    return drives.road_and_wall(GROUND_Z - ORIGIN[2]) @ rot(0.0, 0.0, 0.4).T + ORIGIN
 
 
 # ---------------------------------------------------------------- writing a sequence
 
 
-def numbers(values) -> str:
-    return " ".join(f"{float(v)!r}" for v in np.ravel(values))
-
-
 def write_calibration(folder) -> None:
     folder.mkdir(parents=True)
-    K = np.array([[FX, 0.0, CX], [0.0, FX, CY], [0.0, 0.0, 1.0]])
-    lines = ["calib_time: 09-Jan-2012 14:00:15", "corner_dist: 9.950000e-02"]
-    for i in (0, 1):
-        P = K @ np.hstack([np.eye(3), [[-BASELINE * i], [0.0], [0.0]]])
-        lines += [f"S_{i:02d}: 1.392000e+03 5.120000e+02", f"K_{i:02d}: {numbers(K)}", f"D_{i:02d}: 0 0 0 0 0",
-                  f"R_{i:02d}: {numbers(np.eye(3))}", f"T_{i:02d}: 0 0 0", f"S_rect_{i:02d}: {WIDTH} {HEIGHT}",
-                  f"R_rect_{i:02d}: {numbers(R_RECT[i])}", f"P_rect_{i:02d}: {numbers(P)}"]
-    (folder / "perspective.txt").write_text("\n".join(lines) + "\n")
+    (folder / "perspective.txt").write_text(
+        drives.cam_to_cam(K, WIDTH, HEIGHT, {i: (-BASELINE * i, R_RECT[i]) for i in (0, 1)}))
     fisheye = rigid(Q, T0 + [0.0, 1.0, 0.0])
     (folder / "calib_cam_to_pose.txt").write_text("".join(
         f"image_{i:02d}: {numbers((CAM_TO_POSE.get(i, fisheye))[:3])}\n" for i in range(4)))
@@ -142,11 +126,6 @@ def car_elements() -> list[str]:
     return moving + [parked, building]
 
 
-def times(k: int) -> str:
-    ns = 975522090 + 103_651_234 * k
-    return f"2013-05-28 08:46:{2 + ns // 10**9:02d}.{ns % 10**9:09d}"
-
-
 def write_sequence(root):
     """``root`` as KITTI-360's root holding one sequence; returns ``root``."""
     rng = np.random.default_rng(3)
@@ -162,11 +141,10 @@ def write_sequence(root):
         for i in (0, 1):
             write_image(images / f"image_{i:02d}" / "data_rect" / f"{name}.png",
                         rng.integers(0, 256, (HEIGHT, WIDTH, 3)).astype(np.float32) / 255.0)
-        T = invert_rigid(world_from_velo(k))
-        velo = pts @ T[:3, :3].T + T[:3, 3]
-        np.hstack([velo, np.full((len(velo), 1), 0.3)]).astype("<f4").tofile(scans / f"{name}.bin")
+        drives.write_velodyne(scans / f"{name}.bin", pts, world_from_velo(k))
     for i in (0, 1):
-        (images / f"image_{i:02d}" / "timestamps.txt").write_text("".join(times(k) + "\n" for k in range(N_FRAMES)))
+        (images / f"image_{i:02d}" / "timestamps.txt").write_text(
+            drives.timestamps("2013-05-28 08:46", 2, 975522090, N_FRAMES))
     (poses / "poses.txt").write_text("".join(f"{k} {numbers(world_from_pose(k)[:3])}\n" for k in POSED))
     (poses / "cam0_to_world.txt").write_text("".join(f"{k} {numbers(world_from_camera(0, k))}\n" for k in POSED))
     write_boxes(root / "data_3d_bboxes" / "train" / f"{SEQ}.xml", car_elements())
@@ -180,26 +158,19 @@ def root(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def package(root, tmp_path_factory):
-    out = tmp_path_factory.mktemp("pkg") / "pkg"
-    assert main(["import", "kitti-360", str(root), "--sequence", SEQ, "--out", str(out), "--copy-images",
-                 "--quiet"]) == 0
-    return load_manifest(out)
+    return drives.imported(["import", "kitti-360", str(root), "--sequence", SEQ], tmp_path_factory)
 
 
 # ---------------------------------------------------------------- round trip
 
 
 def test_poses_come_back_and_the_frame_without_a_pose_is_left_out(package):
-    T = np.asarray(package.source["transform"])
     assert [c.name for c in package.cameras] == ["image_00", "image_01"]
     assert package.source["frame_names"] == [f"{k:010d}" for k in POSED]
     assert package.source["frames_without_pose"] == 1
     assert package.source["frames_without_pose_first"] == [f"{UNPOSED:010d}"]
-    for cam, i in zip(package.cameras, (0, 1)):
-        for cf, k in zip(cam.frames, POSED):
-            back = invert_rigid(T) @ cf.camera_to_world
-            assert np.abs(back - world_from_camera(i, k)).max() < TOL_M, (cam.name, k)
-            assert np.allclose(cf.K, [[FX, 0, CX + 0.5], [0, FX, CY + 0.5], [0, 0, 1]], rtol=0, atol=1e-12)
+    drives.assert_cameras(package, lambda camera, fi: world_from_camera(int(camera[-2:]), POSED[fi]),
+                          lambda camera: K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]], TOL_M)
     expected = [103_651_234 * k / 1e9 for k in POSED]
     assert np.allclose([f.timestamp for f in package.frames], expected, rtol=0, atol=1e-9)
     assert main(["validate", str(package.root)]) == 0
@@ -220,60 +191,32 @@ def test_poses_txt_with_the_rig_gives_the_same_cameras(root, tmp_path):
 
 
 def test_the_ground_is_the_lidar_road_and_the_world_metric(package):
-    T = np.asarray(package.source["transform"])
-    assert package.source["scale"] == 1.0
-    road = world_points()[:-112] @ T[:3, :3].T + T[:3, 3]  # the wall's 112 points left out
-    assert np.abs(road[:, 2]).max() < 0.02
-    assert package.source["ground_fit"]["weak"] == []
-
-
-def expected_depth(i: int, k: int, scan: np.ndarray) -> np.ndarray:
-    M = invert_rigid(world_from_camera(i, k)) @ world_from_velo(k)
-    p = scan @ M[:3, :3].T + M[:3, 3]
-    p = p[p[:, 2] >= 0.5]
-    col = np.floor(FX * p[:, 0] / p[:, 2] + CX + 0.5).astype(int)
-    row = np.floor(FX * p[:, 1] / p[:, 2] + CY + 0.5).astype(int)
-    depth = np.zeros((HEIGHT, WIDTH))
-    for c, r, z in zip(col, row, p[:, 2]):
-        if 0 <= c < WIDTH and 0 <= r < HEIGHT and (depth[r, c] == 0 or z < depth[r, c]):
-            depth[r, c] = z
-    return depth
+    drives.assert_metric_ground(package, world_points()[:-drives.WALL_POINTS], 0.02)
 
 
 def test_every_camera_gets_its_frames_scans_as_sparse_depth(root, package):
-    measured = 0
     folder = root / "data_3d_raw" / SEQ / "velodyne_points" / "data"
-    for cam, i in zip(package.cameras, (0, 1)):
-        assert cam.depth_zero == "unmeasured"
-        for cf, k in zip(cam.frames, POSED):
-            scan = np.fromfile(folder / f"{k:010d}.bin", "<f4").reshape(-1, 4)[:, :3]
-            want = expected_depth(i, k, scan.astype(np.float64))
-            got = read_image(package.resolve(cf.depth))[:, :, 0]
-            assert np.array_equal(got > 0, want > 0), (cam.name, k)
-            assert np.allclose(got, want, rtol=1e-7, atol=0), (cam.name, k)
-            measured += int((want > 0).sum())
-    assert measured > 500
+
+    def want(camera: str, fi: int) -> np.ndarray:
+        i, k = int(camera[-2:]), POSED[fi]
+        scan = np.fromfile(folder / f"{k:010d}.bin", "<f4").reshape(-1, 4)[:, :3]
+        M = invert_rigid(world_from_camera(i, k)) @ world_from_velo(k)
+        return drives.expected_depth(moved(M, scan.astype(np.float64)), K, WIDTH, HEIGHT)
+
+    assert [c.name for c in package.cameras] == ["image_00", "image_01"]
+    drives.assert_sparse_depth(package, want, rtol=1e-7)
 
 
 def test_the_boxes_come_back_as_existing_actors(package):
-    T = np.asarray(package.source["transform"])
     by_id = {a.id: a for a in package.actors}
     assert sorted(by_id) == ["car_7", "car_9"]
-    frame = {k: fi for fi, k in enumerate(POSED)}
     car, parked = by_id["car_7"], by_id["car_9"]
     assert car.kind == "existing" and np.allclose(car.wlh, [CAR_LWH[1], CAR_LWH[0], CAR_LWH[2]], rtol=0, atol=1e-12)
-    for k in POSED:
-        pose = car.poses[frame[k]]
-        if k in (1, 2, 4, 5, 6):
-            assert np.abs(invert_rigid(T) @ pose.matrix() - car_box(k)).max() < TOL_M, k
-        else:
-            assert pose is None, k
+    drives.assert_actor_poses(package, car, lambda fi: car_box(POSED[fi]) if POSED[fi] in (1, 2, 4, 5, 6) else None,
+                              TOL_M)
     assert np.allclose(parked.wlh, [PARKED_LWH[1], PARKED_LWH[0], PARKED_LWH[2]], rtol=0, atol=1e-12)
-    for k in POSED:  # parked in its window (frames 4 to 20): the reflected width axis flipped back
-        pose = parked.poses[frame[k]]
-        assert (pose is None) == (k < 4), k
-        if pose is not None:
-            assert np.abs(invert_rigid(T) @ pose.matrix() - PARKED).max() < TOL_M, k
+    # parked in its window (frames 4 to 20): the reflected width axis flipped back
+    drives.assert_actor_poses(package, parked, lambda fi: None if POSED[fi] < 4 else PARKED, TOL_M)
 
 
 def test_the_right_camera_as_lateral_truth(root, tmp_path, capsys):
@@ -345,14 +288,7 @@ def test_kitti360scripts_reads_the_same_poses_calibration_and_boxes(root, monkey
 
 
 def refused(root, tmp_path, capsys, *needles, args=()):
-    out = tmp_path / "out" / "pkg"
-    rc = main(["import", "kitti-360", str(root), "--sequence", SEQ, "--out", str(out), "--quiet", *args])
-    err = capsys.readouterr().err.strip()
-    assert rc == 2, err
-    assert len(err.splitlines()) == 1, err
-    for n in needles:
-        assert n in err, (n, err)
-    assert not out.exists() and not (out.parent.exists() and any(out.parent.iterdir()))
+    drives.refused(["import", "kitti-360", str(root), "--sequence", SEQ, *args], tmp_path, capsys, *needles)
 
 
 @pytest.fixture

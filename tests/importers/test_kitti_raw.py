@@ -18,9 +18,14 @@ from symdrive_core.importers.oxts import EARTH_RADIUS_M, euler_rotation
 from symdrive_core.io.images import read_image, write_image
 from symdrive_core.scene import load_manifest
 
+from . import drives
+from .drives import moved, numbers, rigid
+
 DATE, DRIVE = "2011_09_26", "0005"
 N_FRAMES, WIDTH, HEIGHT = 8, 64, 32
 FX, CX, CY = 30.0, 31.5, 15.5  # KITTI's pixel centres at integers
+K = np.array([[FX, 0.0, CX], [0.0, FX, CY], [0.0, 0.0, 1.0]])
+FIRST_NS = 964389445  # the first frame's time past the second, in nanoseconds
 LAT0, LON0, ALT0 = 49.011, 8.4229, 112.9
 GROUND_Z = -0.93  # the road below the IMU in the source frame (East-North-Up, origin the first fix)
 OFFSETS = {0: 0.0, 1: -0.54, 2: 0.06, 3: -0.47}  # P_rect_0i = K [I | (t, 0, 0)]
@@ -30,12 +35,6 @@ TOL_M = 1e-7  # round-off of Mercator coordinates near 5.4e6 m (measured: 4e-9 m
 
 def rot(rx, ry, rz):
     return euler_rotation(rx, ry, rz)
-
-
-def rigid(R, t) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
 
 
 # The rig: IMU -> Velodyne, Velodyne -> unrectified camera 0, the rectifying rotation.
@@ -69,11 +68,7 @@ def car_box(k: int) -> np.ndarray:
 
 def world_points() -> np.ndarray:
     """The road ahead and beside the path, and a wall that hides part of it."""
-    x, y = np.meshgrid(np.arange(-2.0, 30.0, 0.45), np.arange(-8.0, 8.0, 0.55))
-    road = np.stack([x.ravel(), y.ravel(), np.full(x.size, GROUND_Z)], 1)
-    wy, wz = np.meshgrid(np.arange(-4.0, 0.0, 0.3), np.arange(0.0, 2.0, 0.25))
-    wall = np.stack([np.full(wy.size, 16.0), wy.ravel(), GROUND_Z + wz.ravel()], 1)
-    return np.concatenate([road, wall])
+    return drives.road_and_wall(GROUND_Z)
 
 
 # ---------------------------------------------------------------- writing a drive
@@ -96,28 +91,13 @@ def oxts_line(k: int) -> str:
     return " ".join(repr(float(v)) for v in [lat, lon, t[2], roll, pitch, yaw]) + " " + " ".join(map(str, rest))
 
 
-def numbers(values) -> str:
-    return " ".join(f"{float(v)!r}" for v in np.ravel(values))
-
-
 def write_calibration(date_dir) -> None:
-    K = np.array([[FX, 0.0, CX], [0.0, FX, CY], [0.0, 0.0, 1.0]])
-    lines = ["calib_time: 09-Jan-2012 13:57:47", "corner_dist: 9.950000e-02"]
-    for i, tx in OFFSETS.items():
-        P = K @ np.hstack([np.eye(3), [[tx], [0.0], [0.0]]])
-        lines += [f"S_{i:02d}: 1.392000e+03 5.120000e+02", f"K_{i:02d}: {numbers(K)}", f"D_{i:02d}: 0 0 0 0 0",
-                  f"R_{i:02d}: {numbers(np.eye(3))}", f"T_{i:02d}: 0 0 0", f"S_rect_{i:02d}: {WIDTH} {HEIGHT}",
-                  f"R_rect_{i:02d}: {numbers(R_RECT)}", f"P_rect_{i:02d}: {numbers(P)}"]
-    (date_dir / "calib_cam_to_cam.txt").write_text("\n".join(lines) + "\n")
+    (date_dir / "calib_cam_to_cam.txt").write_text(
+        drives.cam_to_cam(K, WIDTH, HEIGHT, {i: (tx, R_RECT) for i, tx in OFFSETS.items()}))
     for name, T in (("calib_velo_to_cam.txt", VELO_TO_CAM), ("calib_imu_to_velo.txt", IMU_TO_VELO)):
         extra = "delta_f: 0 0\ndelta_c: 0 0\n" if name == "calib_velo_to_cam.txt" else ""
         (date_dir / name).write_text(f"calib_time: 15-Mar-2012 11:37:16\nR: {numbers(T[:3, :3])}\n"
                                      f"T: {numbers(T[:3, 3])}\n{extra}")
-
-
-def times(k: int) -> str:
-    ns = 964389445 + 103_651_234 * k
-    return f"2011-09-26 13:02:{25 + ns // 10**9:02d}.{ns % 10**9:09d}"
 
 
 def tracklet_pose(k: int) -> str:
@@ -162,11 +142,9 @@ def write_drive(root):
             write_image(drive / f"image_{i:02d}" / "data" / f"{name}.png",
                         rng.integers(0, 256, (HEIGHT, WIDTH, 3)).astype(np.float32) / 255.0)
         (drive / "oxts" / "data" / f"{name}.txt").write_text(oxts_line(k) + "\n")
-        velo = pts @ invert_rigid(world_from_velo(k))[:3, :3].T + invert_rigid(world_from_velo(k))[:3, 3]
-        np.hstack([velo, np.full((len(velo), 1), 0.3)]).astype("<f4").tofile(
-            drive / "velodyne_points" / "data" / f"{name}.bin")
+        drives.write_velodyne(drive / "velodyne_points" / "data" / f"{name}.bin", pts, world_from_velo(k))
     for sub in ("image_02", "image_03", "oxts", "velodyne_points"):
-        (drive / sub / "timestamps.txt").write_text("".join(times(k) + "\n" for k in range(N_FRAMES)))
+        (drive / sub / "timestamps.txt").write_text(drives.timestamps("2011-09-26 13:02", 25, FIRST_NS, N_FRAMES))
     write_tracklets(drive / "tracklet_labels.xml",
                     [tracklet("Car", CAR_WLH, 1, [tracklet_pose(k) for k in range(1, N_FRAMES)]),
                      tracklet("Pedestrian", (0.6, 0.8, 1.7), 0, [tracklet_pose(0)])])
@@ -180,71 +158,41 @@ def drive(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def package(drive, tmp_path_factory):
-    out = tmp_path_factory.mktemp("pkg") / "pkg"
-    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--copy-images", "--quiet"]) == 0
-    return load_manifest(out)
+    return drives.imported(["import", "kitti-raw", str(drive)], tmp_path_factory)
 
 
 # ---------------------------------------------------------------- round trip
 
 
 def test_poses_come_back_in_the_source_frame(package):
-    T = np.asarray(package.source["transform"])
     assert [c.name for c in package.cameras] == ["image_02", "image_03"]
-    for cam, i in zip(package.cameras, (2, 3)):
-        for k, cf in enumerate(cam.frames):
-            back = invert_rigid(T) @ cf.camera_to_world
-            assert np.abs(back - world_from_camera(i, k)).max() < TOL_M, (cam.name, k)
-            assert np.allclose(cf.K, [[FX, 0, CX + 0.5], [0, FX, CY + 0.5], [0, 0, 1]], rtol=0, atol=1e-12)
+    drives.assert_cameras(package, lambda camera, k: world_from_camera(int(camera[-2:]), k),
+                          lambda camera: K + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]], TOL_M)
     assert package.source["frame_names"] == [f"{k:010d}" for k in range(N_FRAMES)]
-    expected = [(964389445 + 103_651_234 * k) / 1e9 - 0.964389445 for k in range(N_FRAMES)]
+    expected = [(FIRST_NS + drives.STEP_NS * k) / 1e9 - FIRST_NS / 1e9 for k in range(N_FRAMES)]
     assert np.allclose([f.timestamp for f in package.frames], expected, rtol=0, atol=1e-9)
 
 
 def test_the_ground_is_the_lidar_road_and_the_world_metric(package):
-    """The LiDAR's road becomes z = 0 of a metric world, to within what the fit's other term, the
-    camera path's constant height, pulls it by (the rig's roll and pitch move the cameras by 1 cm)."""
-    T = np.asarray(package.source["transform"])
-    assert package.source["scale"] == 1.0
-    road = world_points()[:-112] @ T[:3, :3].T + T[:3, 3]  # the wall's 112 points left out
-    assert np.abs(road[:, 2]).max() < 0.02
-    assert package.source["ground_fit"]["weak"] == []
-
-
-def expected_depth(i: int, k: int, scan: np.ndarray) -> np.ndarray:
-    p = scan @ camera_from_velo(i)[:3, :3].T + camera_from_velo(i)[:3, 3]
-    p = p[p[:, 2] >= 0.5]
-    col = np.floor(FX * p[:, 0] / p[:, 2] + CX + 0.5).astype(int)
-    row = np.floor(FX * p[:, 1] / p[:, 2] + CY + 0.5).astype(int)
-    depth = np.zeros((HEIGHT, WIDTH))
-    for c, r, z in zip(col, row, p[:, 2]):
-        if 0 <= c < WIDTH and 0 <= r < HEIGHT and (depth[r, c] == 0 or z < depth[r, c]):
-            depth[r, c] = z
-    return depth
+    """The LiDAR's road becomes z = 0 of a metric world (the rig's roll and pitch move the cameras,
+    whose constant height the fit also weighs, by 1 cm)."""
+    drives.assert_metric_ground(package, world_points()[:-drives.WALL_POINTS], 0.02)
 
 
 def test_every_camera_gets_the_scans_as_sparse_depth(drive, package):
-    measured = 0
-    for cam, i in zip(package.cameras, (2, 3)):
-        assert cam.depth_zero == "unmeasured"
-        for k, cf in enumerate(cam.frames):
-            scan = np.fromfile(drive / "velodyne_points" / "data" / f"{k:010d}.bin", "<f4").reshape(-1, 4)[:, :3]
-            want = expected_depth(i, k, scan.astype(np.float64))
-            got = read_image(package.resolve(cf.depth))[:, :, 0]
-            assert np.array_equal(got > 0, want > 0), (cam.name, k)
-            assert np.allclose(got, want, rtol=1e-7, atol=0), (cam.name, k)
-            measured += int((want > 0).sum())
-    assert measured > 500
+    def want(camera: str, k: int) -> np.ndarray:
+        scan = np.fromfile(drive / "velodyne_points" / "data" / f"{k:010d}.bin", "<f4").reshape(-1, 4)[:, :3]
+        return drives.expected_depth(moved(camera_from_velo(int(camera[-2:])), scan.astype(np.float64)), K,
+                                     WIDTH, HEIGHT)
+
+    assert [c.name for c in package.cameras] == ["image_02", "image_03"]
+    drives.assert_sparse_depth(package, want, rtol=1e-7)
 
 
 def test_the_lidar_points_are_the_first_cameras_returns_coloured_there(drive):
     d = read_kitti_raw(drive, replace(KittiRawConfig(), lidar_points=10**6))  # every return kept
-    T = invert_rigid(world_from_camera(2, 0))
     world = world_points()
-    cam = world @ T[:3, :3].T + T[:3, 3]
-    col = np.floor(FX * cam[:, 0] / cam[:, 2] + CX + 0.5)
-    row = np.floor(FX * cam[:, 1] / cam[:, 2] + CY + 0.5)
-    seen = (cam[:, 2] >= 0.5) & (col >= 0) & (col < WIDTH) & (row >= 0) & (row < HEIGHT)
+    col, row, seen = drives.landing(moved(invert_rigid(world_from_camera(2, 0)), world), K, WIDTH, HEIGHT)
     n = int(seen.sum())
     assert n > 200
     # the first scan's returns come first, in the scan's order; the scan holds float32 coordinates
@@ -255,14 +203,10 @@ def test_the_lidar_points_are_the_first_cameras_returns_coloured_there(drive):
 
 
 def test_the_tracklet_comes_back_as_an_existing_actor(package, capsys):
-    T = np.asarray(package.source["transform"])
     (car,) = package.actors
     assert car.id == "tracklet_0" and car.kind == "existing" and car.splats is None
     assert np.allclose(car.wlh, CAR_WLH, rtol=0, atol=1e-12)
-    assert car.poses[0] is None
-    for k in range(1, N_FRAMES):
-        back = invert_rigid(T) @ car.poses[k].matrix()
-        assert np.abs(back - car_box(k)).max() < TOL_M, k
+    drives.assert_actor_poses(package, car, lambda k: None if k == 0 else car_box(k), TOL_M)
 
 
 def test_pykitti_reads_the_same_poses_and_calibration(drive):
@@ -305,14 +249,7 @@ def test_one_camera(drive, tmp_path):
 
 
 def refused(drive, tmp_path, capsys, *needles):
-    out = tmp_path / "out" / "pkg"
-    rc = main(["import", "kitti-raw", str(drive), "--out", str(out), "--quiet"])
-    err = capsys.readouterr().err.strip()
-    assert rc == 2, err
-    assert len(err.splitlines()) == 1, err
-    for n in needles:
-        assert n in err, (n, err)
-    assert not out.exists() and not (out.parent.exists() and any(out.parent.iterdir()))
+    drives.refused(["import", "kitti-raw", str(drive)], tmp_path, capsys, *needles)
 
 
 @pytest.fixture

@@ -21,6 +21,9 @@ from symdrive_core.io.images import read_image, write_image
 from symdrive_core.rotations import matrix_to_quat
 from symdrive_core.scene import load_manifest
 
+from . import drives
+from .drives import moved, rigid
+
 VERSION, SCENE = "v1.0-mini", "scene-0061"
 N_SAMPLES, WIDTH, HEIGHT = 4, 64, 36
 T0 = 1532402927647951  # the first sample's time, microseconds
@@ -43,12 +46,6 @@ def rot(rx, ry, rz) -> np.ndarray:
             R[0, 2], R[2, 0] = s, -s
         return R
     return axis(2, rz) @ axis(1, ry) @ axis(0, rx)
-
-
-def rigid(R, t) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
 
 
 # Where each sensor sits on the vehicle (x forward, y left, z up): OpenCV camera axes, the LiDAR's
@@ -138,8 +135,7 @@ def write_dataset(root):
             name = f"n015-2018-07-24-11-22-45+0800__{c}__{t}"
             if c == "LIDAR_TOP":
                 filename = f"samples/{c}/{name}.pcd.bin"
-                T = invert_rigid(world_from_sensor(k, c))
-                local = pts @ T[:3, :3].T + T[:3, 3]
+                local = moved(invert_rigid(world_from_sensor(k, c)), pts)
                 near = local[np.linalg.norm(local, axis=1) < 45.0]
                 rows = np.hstack([near, np.full((len(near), 1), 7.0), np.arange(len(near))[:, None] % 32])
                 rows.astype("<f4").tofile(root / filename)
@@ -195,11 +191,6 @@ def write_dataset(root):
 CAMERAS = "CAM_FRONT,CAM_BACK"
 
 
-def import_scene(root, out, *extra) -> int:
-    return main(["import", "nuscenes", str(root), "--version", VERSION, "--scene", SCENE, "--cameras", CAMERAS,
-                 "--out", str(out), "--quiet", *extra])
-
-
 @pytest.fixture(scope="module")
 def dataroot(tmp_path_factory):
     return write_dataset(tmp_path_factory.mktemp("nuscenes"))
@@ -207,9 +198,8 @@ def dataroot(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def package(dataroot, tmp_path_factory):
-    out = tmp_path_factory.mktemp("pkg") / "pkg"
-    assert import_scene(dataroot, out, "--copy-images") == 0
-    return load_manifest(out)
+    return drives.imported(["import", "nuscenes", str(dataroot), "--version", VERSION, "--scene", SCENE, "--cameras",
+                            CAMERAS], tmp_path_factory)
 
 
 # ---------------------------------------------------------------- round trip
@@ -218,13 +208,9 @@ def package(dataroot, tmp_path_factory):
 def test_each_image_has_its_own_times_pose(package):
     """A camera's pose is the ego pose at the image's own time composed with where it sits on the
     vehicle; its K is camera_intrinsic with pixel centres moved to +0.5."""
-    T = np.asarray(package.source["transform"])
     assert [c.name for c in package.cameras] == ["CAM_FRONT", "CAM_BACK"]  # the order asked for
-    for cam in package.cameras:
-        for k, cf in enumerate(cam.frames):
-            back = invert_rigid(T) @ cf.camera_to_world
-            assert np.abs(back - world_from_sensor(k, cam.name)).max() < TOL_M, (cam.name, k)
-            assert np.array_equal(cf.K, K[cam.name] + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]])
+    drives.assert_cameras(package, lambda camera, k: world_from_sensor(k, camera),
+                          lambda camera: K[camera] + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]], TOL_M)
     assert package.source["frame_names"] == [token("sample", k) for k in range(N_SAMPLES)]
     # a frame's time is its earliest image's, in seconds since the first sample
     assert np.allclose([f.timestamp for f in package.frames], [0.5 * k + 0.012 for k in range(N_SAMPLES)],
@@ -234,12 +220,9 @@ def test_each_image_has_its_own_times_pose(package):
 
 
 def test_the_ground_is_the_lidar_road_and_the_world_metric(package):
-    T = np.asarray(package.source["transform"])
-    assert package.source["scale"] == 1.0
     x, y = np.meshgrid(np.arange(395.0, 450.0, 0.7), np.arange(1172.0, 1190.0, 0.6))
-    road = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1) @ T[:3, :3].T + T[:3, 3]
-    assert np.abs(road[:, 2]).max() < 0.03  # the camera path's term moves it by the ego's roll and pitch
-    assert package.source["ground_fit"]["weak"] == []
+    road = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
+    drives.assert_metric_ground(package, road, 0.03)  # the camera path's term moves it by the ego's roll and pitch
 
 
 def scan_of(root, k: int) -> np.ndarray:
@@ -247,62 +230,38 @@ def scan_of(root, k: int) -> np.ndarray:
     return np.fromfile(path, "<f4").reshape(-1, 5)[:, :3].astype(np.float64)
 
 
-def expected_depth(channel: str, k: int, scan: np.ndarray) -> np.ndarray:
+def camera_from_lidar(k: int, channel: str) -> np.ndarray:
     """The sweep through the LiDAR's pose at its time and the camera's at the image's."""
-    M = invert_rigid(world_from_sensor(k, channel)) @ world_from_sensor(k, "LIDAR_TOP")
-    p = scan @ M[:3, :3].T + M[:3, 3]
-    p = p[p[:, 2] >= 0.5]
-    Kc = K[channel]
-    col = np.floor(Kc[0, 0] * p[:, 0] / p[:, 2] + Kc[0, 2] + 0.5).astype(int)
-    row = np.floor(Kc[1, 1] * p[:, 1] / p[:, 2] + Kc[1, 2] + 0.5).astype(int)
-    depth = np.zeros((HEIGHT, WIDTH))
-    for c, r, z in zip(col, row, p[:, 2]):
-        if 0 <= c < WIDTH and 0 <= r < HEIGHT and (depth[r, c] == 0 or z < depth[r, c]):
-            depth[r, c] = z
-    return depth
+    return invert_rigid(world_from_sensor(k, channel)) @ world_from_sensor(k, "LIDAR_TOP")
 
 
 def test_every_camera_gets_the_sweep_as_sparse_depth(dataroot, package):
-    measured = 0
-    for cam in package.cameras:
-        assert cam.depth_zero == "unmeasured"
-        for k, cf in enumerate(cam.frames):
-            want = expected_depth(cam.name, k, scan_of(dataroot, k))
-            got = read_image(package.resolve(cf.depth))[:, :, 0]
-            assert np.array_equal(got > 0, want > 0), (cam.name, k)
-            assert np.allclose(got, want, rtol=1e-6, atol=0), (cam.name, k)
-            measured += int((want > 0).sum())
-    assert measured > 500
+    def want(channel: str, k: int) -> np.ndarray:
+        return drives.expected_depth(moved(camera_from_lidar(k, channel), scan_of(dataroot, k)), K[channel],
+                                     WIDTH, HEIGHT)
+
+    drives.assert_sparse_depth(package, want, rtol=1e-6)
 
 
 def test_the_lidar_points_are_the_first_cameras_returns_coloured_there(dataroot):
     config = replace(NuScenesConfig(), cameras=("CAM_FRONT", "CAM_BACK"), lidar_points=10**6)  # every return kept
     d = read_nuscenes(dataroot, SCENE, config)
     scan = scan_of(dataroot, 0)
-    M = invert_rigid(world_from_sensor(0, "CAM_FRONT")) @ world_from_sensor(0, "LIDAR_TOP")
-    p = scan @ M[:3, :3].T + M[:3, 3]
-    col = np.floor(40.0 * p[:, 0] / p[:, 2] + 31.7 + 0.5)
-    row = np.floor(41.0 * p[:, 1] / p[:, 2] + 17.9 + 0.5)
-    seen = (p[:, 2] >= 0.5) & (col >= 0) & (col < WIDTH) & (row >= 0) & (row < HEIGHT)
+    col, row, seen = drives.landing(moved(camera_from_lidar(0, "CAM_FRONT"), scan), K["CAM_FRONT"], WIDTH, HEIGHT)
     n = int(seen.sum())
     assert n > 100
-    W = world_from_sensor(0, "LIDAR_TOP")
-    assert np.abs(d.source.points[:n] - (scan[seen] @ W[:3, :3].T + W[:3, 3])).max() < TOL_M
+    assert np.abs(d.source.points[:n] - moved(world_from_sensor(0, "LIDAR_TOP"), scan[seen])).max() < TOL_M
     (image,) = (dataroot / "samples" / "CAM_FRONT").glob(f"*__{time_us(0, 'CAM_FRONT')}.jpg")
     rgb = read_image(image, channels=3)
     assert np.array_equal(d.source.colors[:n], rgb[row[seen].astype(int), col[seen].astype(int)])
 
 
 def test_the_annotated_car_comes_back_as_an_existing_actor(package):
-    T = np.asarray(package.source["transform"])
     (car,) = package.actors  # the pedestrian is not a vehicle
     assert car.id == "car_0" and car.kind == "existing" and car.splats is None
     assert package.source["nuscenes"]["instances"] == {"car_0": token("instance", "car")}
     assert np.allclose(car.wlh, CAR_WLH, rtol=0, atol=1e-12)
-    assert car.poses[0] is None
-    for k in range(1, N_SAMPLES):
-        back = invert_rigid(T) @ car.poses[k].matrix()
-        assert np.abs(back - car_box(k)).max() < TOL_M, k
+    drives.assert_actor_poses(package, car, lambda k: None if k == 0 else car_box(k), TOL_M)
 
 
 def test_the_package_validates_with_both_cameras(package):
@@ -389,15 +348,8 @@ def _devkit_rigid(record: dict) -> np.ndarray:
 
 
 def refused(root, tmp_path, capsys, *needles, args=("--cameras", CAMERAS)):
-    out = tmp_path / "out" / "pkg"
-    rc = main(["import", "nuscenes", str(root), "--version", VERSION, "--scene", SCENE, "--out", str(out),
-               "--quiet", *args])
-    err = capsys.readouterr().err.strip()
-    assert rc == 2, err
-    assert len(err.splitlines()) == 1, err
-    for n in needles:
-        assert n in err, (n, err)
-    assert not out.exists() and not (out.parent.exists() and any(out.parent.iterdir()))
+    drives.refused(["import", "nuscenes", str(root), "--version", VERSION, "--scene", SCENE, *args], tmp_path, capsys,
+                   *needles)
 
 
 @pytest.fixture
