@@ -6,6 +6,7 @@ with the tracks' boxes kept, and jittered boxes on a small drive come back close
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -119,3 +120,21 @@ def test_jittered_boxes_come_back_closer_to_the_truth(moving_box, tmp_path):
     before, after = pose_errors(boxes, truth), pose_errors(refined, truth)
     assert before["mean_cm"] > 19.9 and before["mean_deg"] > 1.99
     assert after["mean_cm"] < 10.0 and after["mean_deg"] < 0.8, after
+
+
+def test_the_jitter_script_writes_tracks_the_import_takes_as_they_are(tmp_path, capsys):
+    """``eval_pose_refine.py jitter`` on the Cycles traffic street: every box 0.2 m and 2 degrees off,
+    imported as tracks with nothing reported."""
+    from symdrive_core.cli import main
+    from tests.scripts import load_script
+
+    root = tmp_path / "traffic"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "symdrive_core/data/traffic_street", root)
+    truth = load_manifest(root)
+    load_script("eval_pose_refine").main(["jitter", str(root), "--out", str(tmp_path / "t.json")])
+    assert main(["import", "tracks", str(root), str(tmp_path / "t.json"), "--replace"]) == 0
+    m = load_manifest(root)
+    assert m.source["tracks"] == {"actors": [a.id for a in truth.actors], "reported": []}
+    for a in truth.actors:
+        e = pose_errors(m.actor(a.id).poses, a.poses)
+        assert abs(e["mean_cm"] - 20.0) < 1e-6 and abs(e["mean_deg"] - 2.0) < 1e-6
