@@ -360,4 +360,12 @@ WHY_DEFAULTS = {
                              "faster still but leaves the network less of the scene around the vehicle.",
     "fine-tune iterations": f"{DEFAULTS.insertion.finetune.steps}: past it the masked PSNR stops rising while time grows "
                             "linearly.",
+    "reconstruction iterations": "the config's (more than the bench's budget): held-out PSNR still rises at the "
+                                 "budget's end; the rows show what stopping at half of it costs.",
+    "resolution schedule": "full resolution throughout: coarse to fine trains its first iterations on cheaper "
+                           "images but ended below the full-resolution fit on both Cycles streets, without reaching "
+                           "its held-out PSNR (docs/results.md); `--resolution-schedule` keeps it at hand for larger "
+                           "images, whose iterations it cheapens more.",
+    "densify until": "the config's share of the iterations, 3DGS's schedule scaled to these runs; the rows show "
+                     "what an earlier end saves and costs.",
 }
