@@ -42,12 +42,13 @@ def main() -> None:
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args()
 
+    measured_at = commit()  # the code that runs, before anything else lands
     manifest = load_manifest(args.package)
     chosen = {n: SCHEDULES[n] for n in args.only} if args.only else None
     configs = schedule_configs(args.iters, chosen)
     rows = curves(manifest, configs, args.every, progress=not args.quiet)
     s = summary(rows, default_name(configs))
-    s["package"], s["commit"] = str(args.package), commit()
+    s["package"], s["commit"] = str(args.package), measured_at
     print(format_summary(s))
     paths = write_outputs(rows, s, configs, args.out, f"{manifest.name}, commit {s['commit']}")
     print("wrote", ", ".join(str(p) for p in paths.values()))
