@@ -1,7 +1,7 @@
 """The knobs ``symdrive bench accuracy-time`` measures, each against a package's ground truth.
 
 Renderer knobs (antialiasing, footprint extent, SH degree, precision, resolution) and whole
-reconstructions (iterations, resolution schedule, end of densification: :mod:`.reconstruction`)
+reconstructions (resolution schedule, end of densification: :mod:`.reconstruction`)
 are scored on the package's held-out recorded frames; restorer knobs (sampler steps and ``N_start``, the
 auto-regressive step ``d``) on its lateral views; fine-tune iterations on its held-out insertion
 placements. A group whose ground truth the package lacks is left out and the reason returned.
@@ -360,8 +360,6 @@ WHY_DEFAULTS = {
                              "faster still but leaves the network less of the scene around the vehicle.",
     "fine-tune iterations": f"{DEFAULTS.insertion.finetune.steps}: past it the masked PSNR stops rising while time grows "
                             "linearly.",
-    "reconstruction iterations": "the config's (more than the bench's budget): held-out PSNR still rises at the "
-                                 "budget's end; the rows show what stopping at half of it costs.",
     "resolution schedule": "full resolution throughout: coarse to fine trains its first iterations on cheaper "
                            "images but ended below the full-resolution fit on both Cycles streets, without reaching "
                            "its held-out PSNR (docs/results.md); `--resolution-schedule` keeps it at hand for larger "

@@ -143,9 +143,9 @@ def write_outputs(rows: list[dict], s: dict, configs: dict[str, ReconstructConfi
 
 def reconstruction_settings(manifest, iters: int) -> list:
     """``bench accuracy-time`` rows: whole reconstructions at ``iters`` iterations (the bench's
-    budget; the config's default takes longer) and half of them, each schedule of
-    :data:`SCHEDULES` and an earlier end of densification, each scored on the held-out frames;
-    seconds per run, training alone. A setting the rows share is fitted once."""
+    budget; the config's default takes longer, and :func:`curves` gives PSNR at every iteration
+    count), each schedule of :data:`SCHEDULES` and an earlier end of densification, each scored on
+    the held-out frames; seconds per run, training alone. A setting the rows share is fitted once."""
     from ..eval.views import evaluate_heldout
     from ..optim.reconstruct import Fit
     from .accuracy_time import Setting
@@ -166,8 +166,6 @@ def reconstruction_settings(manifest, iters: int) -> list:
         return run
 
     return [
-        *[Setting("reconstruction iterations", str(n), n == default.iters, measure(replace(base, iters=n)))
-          for n in dict.fromkeys((iters // 2, iters))],
         *[Setting("resolution schedule", name, over["resolution_schedule"] == default.resolution_schedule,
                   measure(replace(base, **over))) for name, over in SCHEDULES.items()],
         *[Setting("densify until", f"{f:g} of the iterations", f == default.densify_until_fraction,

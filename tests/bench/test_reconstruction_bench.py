@@ -65,7 +65,8 @@ def test_accuracy_time_rows_fit_a_shared_setting_once(package, monkeypatch):
     monkeypatch.setattr(reconstruct.Fit, "start", staticmethod(lambda m, cfg: starts.append(cfg) or start(m, cfg)))
     settings = bench.reconstruction_settings(package, 20)
     rows = run_settings(settings, progress=False)
-    assert {r["knob"] for r in rows} == {"reconstruction iterations", "resolution schedule", "densify until"}
-    assert len(starts) == len({repr(c) for c in starts}) == 4  # 10 and 20 iterations, coarse to fine, densify 0.3
+    assert {r["knob"] for r in rows} == {"resolution schedule", "densify until"}
+    assert all(sum(r["default"] for r in rows if r["knob"] == k) == 1 for k in {r["knob"] for r in rows})
+    assert len(starts) == len({repr(c) for c in starts}) == 3  # full resolution, coarse to fine, densify until 0.3
     full = next(r for r in rows if r["value"] == "full resolution")
-    assert full["default"] and full["psnr"] == next(r["psnr"] for r in rows if r["value"] == "20")
+    assert full["default"] and full["psnr"] == next(r["psnr"] for r in rows if r["default"] and r["knob"] == "densify until")
