@@ -105,17 +105,27 @@ def read_sensor_to_camera(path: Path, kitti_camera: int | None = None) -> tuple[
     return rigid_transform(v, path, "transform"), f"{len(v)} numbers: the transform into the package camera as written"
 
 
-def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
-                 min_depth_m: float) -> np.ndarray:
-    """Camera z-depth [H, W] (float32) of the nearest point landing in each pixel, 0 where none
-    does. Pixel (0, 0) covers [0, 1)^2 (``conventions.PIXEL_CENTER_OFFSET``)."""
+def landing(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
+            min_depth_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(indices of the ``points`` that land in the image at least ``min_depth_m`` ahead, their
+    pixel rows, columns and camera z). Pixel (0, 0) covers [0, 1)^2
+    (``conventions.PIXEL_CENTER_OFFSET``)."""
     uv, z = conventions.project_points(points, sensor_to_camera, K)
-    keep = (z >= min_depth_m) & np.isfinite(uv).all(1)
+    keep = np.flatnonzero((z >= min_depth_m) & np.isfinite(uv).all(1))
     col = np.floor(uv[keep, 0]).astype(np.int64)
     row = np.floor(uv[keep, 1]).astype(np.int64)
     inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
+    keep = keep[inside]
+    return keep, row[inside], col[inside], z[keep]
+
+
+def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray, width: int, height: int,
+                 min_depth_m: float) -> np.ndarray:
+    """Camera z-depth [H, W] (float32) of the nearest point landing in each pixel, 0 where none
+    does (:func:`landing`)."""
+    _, row, col, z = landing(points, sensor_to_camera, K, width, height, min_depth_m)
     depth = np.full(width * height, np.inf)
-    np.minimum.at(depth, row[inside] * width + col[inside], z[keep][inside])
+    np.minimum.at(depth, row * width + col, z)
     depth[np.isinf(depth)] = 0.0
     return depth.reshape(height, width).astype(np.float32)
 
@@ -134,15 +144,12 @@ def seen_returns(scans: list[Path], world_from_sensor, sensor_to_camera, K: np.n
     points, colors = [], []
     for scan, image, w_sensor, s_to_c in zip(scans, images, world_from_sensor, sensor_to_camera):
         p = read_scan(scan)
-        uv, z = conventions.project_points(p, s_to_c, K)
-        with np.errstate(invalid="ignore"):
-            col, row = np.floor(uv[:, 0]), np.floor(uv[:, 1])
-            seen = (z >= min_depth_m) & (col >= 0) & (col < width) & (row >= 0) & (row < height)
-        keep = np.flatnonzero(seen)
+        keep, row, col, _ = landing(p, s_to_c, K, width, height, min_depth_m)
         if len(keep) > share:
-            keep = np.sort(rng.choice(keep, share, replace=False))
+            pick = np.sort(rng.choice(len(keep), share, replace=False))
+            keep, row, col = keep[pick], row[pick], col[pick]
         rgb = read_image(image, channels=3)
-        colors.append(rgb[row[keep].astype(np.int64), col[keep].astype(np.int64)])
+        colors.append(rgb[row, col])
         points.append(p[keep] @ w_sensor[:3, :3].T + w_sensor[:3, 3])
     return np.concatenate(points), np.concatenate(colors).astype(np.float64)
 
