@@ -173,7 +173,7 @@ def _camera_view(tables: Tables, dataroot: Path, token: str, channel: str, sampl
     return View(name=f"{channel}/{sample}" if several else sample, K=_intrinsics(tables, cs),
                 width=sd.integer(token, "width", 1), height=sd.integer(token, "height", 1),
                 c2w=_world_from_sensor(tables, token), source=sd.path, where=f"[{token}]",
-                image=dataroot / sd.text(token, "filename"), timestamp=(sd.integer(token, "timestamp") - t0) * US)
+                image=sd.file(token, "filename", dataroot), timestamp=(sd.integer(token, "timestamp") - t0) * US)
 
 
 def _in_order(grouped, cameras: tuple[str, ...]):
@@ -247,7 +247,7 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
     scans, points, colors, to_camera = None, None, None, {}
     if any(LIDAR in keyframes[s] for s in samples):
         sweeps = [_keyframe(sd, keyframes, s, LIDAR, LIDAR) for s in grouped.frame_keys]
-        scans = [dataroot / sd.text(t, "filename") for t in sweeps]
+        scans = [sd.file(t, "filename", dataroot) for t in sweeps]
         world_from_lidar = [_world_from_sensor(tables, t) for t in sweeps]
         for cam, row in zip(grouped.cameras, grouped.table):
             to_camera[cam] = [conventions.invert_rigid(v.c2w) @ w for v, w in zip(row, world_from_lidar)]

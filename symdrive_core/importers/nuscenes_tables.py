@@ -44,6 +44,18 @@ class Table:
             self.fail(token, key, f"expected a string, got {v!r}")
         return v
 
+    def file(self, token: str, key: str, root: Path) -> Path:
+        """The file a record names (``sample_data.filename``) under ``root``: a table is data from
+        elsewhere, so a name that leads outside ``root`` (absolute, ``..``, a link out) is refused,
+        never followed."""
+        from ..scene import is_inside
+
+        rel = self.text(token, key)
+        full = Path(root) / rel
+        if not rel or Path(rel).is_absolute() or not is_inside(full, root):
+            self.fail(token, key, f"{rel!r} lies outside DATAROOT {root}")
+        return full
+
     def integer(self, token: str, key: str, minimum: int = 0) -> int:
         v = self.value(token, key)
         if isinstance(v, bool) or not isinstance(v, int) or v < minimum:

@@ -371,6 +371,14 @@ def test_a_token_that_points_nowhere(bad, tmp_path, capsys):
             "points nowhere", "ego_pose.json")
 
 
+@pytest.mark.parametrize("name", ["../outside.jpg", "/etc/hostname", "samples/../../outside.jpg"])
+def test_a_file_name_leading_out_of_the_dataroot_is_refused_not_read(bad, tmp_path, capsys, name):
+    (bad.parent / "outside.jpg").write_bytes(b"not read")
+    sd = token("sd", "CAM_FRONT", 1)
+    edit(bad, "sample_data", sd, filename=name)
+    refused(bad, tmp_path, capsys, "sample_data.json", f"[{sd}].filename", "outside DATAROOT")
+
+
 def test_a_missing_table(bad, tmp_path, capsys):
     (bad / VERSION / "calibrated_sensor.json").unlink()
     refused(bad, tmp_path, capsys, "calibrated_sensor.json", "table not found")
