@@ -55,6 +55,17 @@ def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: di
     return {"frames": len(frames), **{f"psnr_{k}": _mean(v) for k, v in rows.items()}}
 
 
+SHADOW_TRUTH_STEP = 0.04  # sRGB change (any channel) above Cycles' residual noise: the removed car's doing
+
+
+def removed_shadow(recorded: np.ndarray, without: np.ndarray, car: np.ndarray) -> np.ndarray:
+    """The pixels outside a removed car's mask that its removal changes in the truth (the recorded
+    frame against Cycles' render without the car) by more than :data:`SHADOW_TRUTH_STEP`: its
+    shadow, and the little light it threw on what stands near."""
+    step = np.abs(np.asarray(recorded, np.float64) - np.asarray(without, np.float64)).max(-1)
+    return (step > SHADOW_TRUTH_STEP) & ~car
+
+
 def edited(manifest: Manifest, edit: EditTruth) -> Manifest:
     """``manifest`` with ``edit`` applied at its frame: the actor removed there (remove) or at the
     truth's edited pose (move, retime), its recorded poses kept."""
@@ -71,8 +82,9 @@ def edited(manifest: Manifest, edit: EditTruth) -> Manifest:
 def evaluate_edits(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
                    inpaint: Inpainter | None = None, dilate_px: int = 2) -> dict:
     """Per edit kind, the edited frame against Cycles' (``ground_truth.edits``): PSNR over the
-    region the edit exposes (remove: the car's recorded pixels; move, retime: where it was and no
-    vehicle is now) and, for move and retime, over the car where the truth shows it now; as
+    region the edit exposes (remove: the car's recorded pixels, and those with its shadow,
+    :func:`removed_shadow`; move, retime: where it was and no vehicle is now) and, for move and
+    retime, over the car where the truth shows it now; as
     rendered ("dropped": the car's Gaussians moved or gone) and, with ``inpaint``, with the exposed
     region inpainted."""
     require_truth(manifest, "edits", "scoring edits needs their Cycles renders")
@@ -96,7 +108,13 @@ def evaluate_edits(manifest: Manifest, background: Gaussians, actors: dict[str, 
         if inpaint is not None:
             filled = inpaint(rgb, hole) if hole is not None else rgb
             row.setdefault("exposed_inpainted", []).append(_masked(filled, truth, score_region))
-        if e.kind != "remove":
+        if e.kind == "remove":
+            recorded_truth = read_image(manifest.resolve(manifest.camera(e.camera).frames[e.frame].image), channels=3)
+            with_shadow = car | removed_shadow(recorded_truth, truth, car)
+            row.setdefault("car_and_shadow_dropped", []).append(_masked(rgb, truth, with_shadow))
+            if inpaint is not None:
+                row.setdefault("car_and_shadow_inpainted", []).append(_masked(filled, truth, with_shadow))
+        else:
             row.setdefault("car", []).append(_masked(rgb, truth, car))
             row.setdefault("car_silhouette_iou", []).append(_iou(now.get(e.actor), car))
     return {kind: {"edits": len(next(iter(r.values()))),

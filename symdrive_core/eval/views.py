@@ -54,10 +54,13 @@ def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str
 
 
 class TrafficRenderer:
-    """Background plus recorded vehicles (by actor id), each Gaussian set converted once."""
+    """Background plus recorded vehicles (by actor id), each Gaussian set converted once; where the
+    scene has a sun, each vehicle lays its shadow on the background (as the fit laid it,
+    :mod:`symdrive_core.optim.recorded_shadows`)."""
 
     def __init__(self, background: Gaussians, actors: dict[str, Gaussians]):
         self.background = GaussianTensors.from_gaussians(background)
+        self.sources = dict(actors)
         self.actors = {k: GaussianTensors.from_gaussians(g) for k, g in actors.items()}
 
     @torch.no_grad()
@@ -65,16 +68,33 @@ class TrafficRenderer:
                recorded: bool = False):
         """(rgb [H, W, 3], actor id -> alpha [H, W]) of ``manifest``'s actors at ``frame``, seen by
         ``camera`` at that frame (or ``view``): as edited, or where the drive saw them (``recorded``)."""
-        placed, ids = [], {}
+        placed, ids, casters = [], {}, []
         for a in manifest.actors:
             pose = a.recorded_pose(frame) if recorded else a.pose(frame)
             if a.id in self.actors and pose is not None:
                 placed.append((self.actors[a.id], pose, a.instance_id))
                 ids[a.instance_id] = a.id
+                if a.wlh is not None:
+                    casters.append((self.sources[a.id], pose, a.wlh))
         view = view or CameraView.of_frame(manifest.camera(camera), frame)
         out = render_scene(self.background, placed, view)
         alphas = {ids[iid]: out["instance"][..., k].numpy() for k, iid in enumerate(out["actor_ids"])}
-        return out["rgb"].clamp(0, 1).numpy(), alphas
+        rgb = out["rgb"].clamp(0, 1).numpy()
+        sun, _ = manifest.effects.casting_sun()
+        if sun is not None and casters:
+            rgb = self._with_shadows(rgb, alphas, casters, view, sun, manifest.effects.shade)
+        return rgb, alphas
+
+    def _with_shadows(self, rgb, alphas, casters, view: CameraView, sun, ratio: float) -> np.ndarray:
+        from ..insertion.cast_shadow import lay_shadows, vehicle_shadow_map
+
+        maps = [m for m in (vehicle_shadow_map(g, pose, wlh, sun) for g, pose, wlh in casters) if m is not None]
+        if not maps:
+            return rgb
+        street = render_scene(self.background, [], view)
+        shaded, _ = lay_shadows(rgb, alphas.values(), street["rgb"].clamp(0, 1).numpy(), street["depth"][..., 0].numpy(),
+                                maps, view.camera_to_world, view.K, ratio)
+        return shaded
 
     @torch.no_grad()
     def street_depth(self, manifest: Manifest, camera: str, frame: int) -> np.ndarray:

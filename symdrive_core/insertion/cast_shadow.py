@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from .. import conventions
-from ..conventions import linear_to_srgb, srgb_to_linear, sun_above_horizon
+from ..conventions import sun_above_horizon
 from ..gaussians import Gaussians
 from ..scene import Pose
 from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
@@ -169,10 +169,11 @@ def combined_occlusion(maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, wi
     return union(occlusion_image(smap, c2w, K, width, height, surface_depth) for smap in maps).astype(np.float32)
 
 
-def vehicle_shadow_map(vehicle: Gaussians, pose: Pose, wlh, sun_direction) -> ShadowMap | None:
+def vehicle_shadow_map(vehicle: Gaussians, pose: Pose, wlh, sun_direction, *,
+                       min_cell: float = MAP_MIN_CELL_M) -> ShadowMap | None:
     """The shadow map of ``vehicle`` (its own frame) standing at ``pose``; None when the sun is down."""
     return shadow_map(place(vehicle, pose), sun_direction, vehicle_ground_z(pose, wlh),
-                      bounds=shadow_window(pose, wlh, sun_direction))
+                      bounds=shadow_window(pose, wlh, sun_direction), min_cell=min_cell)
 
 
 def vehicle_shadow(view: FrozenView, vehicle: Gaussians, pose: Pose, wlh, sun_direction,
@@ -187,18 +188,43 @@ def vehicle_shadow(view: FrozenView, vehicle: Gaussians, pose: Pose, wlh, sun_di
                       background, float(ratio))
 
 
+def shaded(background: torch.Tensor, occlusion: torch.Tensor, shadow_ratio) -> torch.Tensor:
+    """sRGB ``background`` [..., 3] with its linear radiance scaled by ``1 - (1 - shadow_ratio) *
+    occlusion`` (occlusion [...]): the one shading rule, differentiable in the background and the
+    ratio, so a reconstruction that lays recorded vehicles' shadows fits through it."""
+    keep = 1.0 - (1.0 - shadow_ratio) * occlusion.clamp(0.0, 1.0)[..., None]
+    x = background.clamp_min(0.0)
+    lin = torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055).clamp_min(1e-12) ** 2.4)
+    y = (lin * keep).clamp(0.0, 1.0)
+    return torch.where(y <= 0.0031308, 12.92 * y, 1.055 * y.clamp_min(1e-12) ** (1.0 / 2.4) - 0.055)
+
+
 def darken(image: np.ndarray, background: np.ndarray, vehicle_alpha: np.ndarray, occlusion: np.ndarray,
            shadow_ratio: float) -> np.ndarray:
     """``image`` with the shadow laid on its background: where the vehicle does not cover a pixel,
     the background's linear radiance is scaled by ``1 - (1 - shadow_ratio) * occlusion``."""
     if not 0.0 <= float(shadow_ratio) <= 1.0:
         raise ValueError(f"shadow_ratio must lie in [0, 1], got {shadow_ratio}")
-    keep = 1.0 - (1.0 - float(shadow_ratio)) * np.clip(occlusion, 0.0, 1.0)[..., None]
     bg = np.asarray(background, dtype=np.float64)
-    shaded = linear_to_srgb(srgb_to_linear(bg) * keep)
+    shade = shaded(torch.from_numpy(bg), torch.from_numpy(np.asarray(occlusion, dtype=np.float64)),
+                   float(shadow_ratio)).numpy()
     uncovered = 1.0 - np.clip(np.asarray(vehicle_alpha, dtype=np.float64), 0.0, 1.0)[..., None]
-    out = np.asarray(image, dtype=np.float64) + uncovered * (shaded - bg)
+    out = np.asarray(image, dtype=np.float64) + uncovered * (shade - bg)
     touched = occlusion > 0
     result = np.array(image, dtype=np.float32, copy=True)
     result[touched] = np.clip(out[touched], 0.0, 1.0)
     return result
+
+
+def lay_shadows(image: np.ndarray, vehicle_alphas, background: np.ndarray, background_depth: np.ndarray,
+                maps: list[ShadowMap], c2w: np.ndarray, K: np.ndarray, shadow_ratio: float):
+    """(``image`` with the shadows of ``maps`` laid on its background, their occlusion [H, W]):
+    ``background`` and ``background_depth`` are the same view without vehicles, ``vehicle_alphas``
+    each vehicle's coverage (vehicles stay as rendered)."""
+    height, width = background_depth.shape
+    occlusion = combined_occlusion(maps, c2w, K, width, height, background_depth)
+    if not (occlusion > 0).any():
+        return image, occlusion
+    alphas = list(vehicle_alphas)
+    vehicles = union(alphas) if alphas else np.zeros_like(occlusion, np.float64)
+    return darken(image, background, vehicles, occlusion, shadow_ratio), occlusion

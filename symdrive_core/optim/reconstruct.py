@@ -35,6 +35,7 @@ from . import decompose, pose_refine
 from .config import DensifyConfig, ReconstructConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .losses import photometric
+from .recorded_shadows import RecordedShadows
 from .views import Levels, View, load_views
 
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
@@ -260,11 +261,13 @@ def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool)
 
 
 def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructConfig, start: int, *,
-              until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None) -> dict:
+              until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None,
+              shadows: RecordedShadows | None = None) -> dict:
     """Optimise ``parts`` jointly against ``views`` from iteration ``start`` to ``until`` (default
     ``cfg.iters``; a fit run in segments passes its :class:`Levels` so a coarse level is computed
     once): the training loop with density control per part (``keep(part) -> [N] bool``, optional:
-    which Gaussians a part may keep after each density step). Every schedule is a function of the
+    which Gaussians a part may keep after each density step; ``shadows``, optional: the recorded
+    vehicles' shadows laid on each render). Every schedule is a function of the
     iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
     seconds, the iteration each image downscale began at, densification steps)."""
     from tqdm import tqdm
@@ -292,7 +295,9 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 if group["name"] == "means":
                     group["lr"] = position_lr(cfg, part.extent, it)
         degree = cfg.sh_degree_at(it)
-        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
+        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0 or shadows is not None)
+        if shadows is not None:
+            rgb = shadows.apply(rgb, info, view, present, it)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if depth_weight > 0:
             dl = depth_loss(info, alpha, view.depth)
@@ -420,6 +425,7 @@ class Fit:
     train_frames: list[int]
     heldout_frames: list[int]
     extent: float
+    shadows: RecordedShadows | None = None  # the recorded vehicles' shadows, where the scene has a sun
 
     @staticmethod
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
@@ -441,13 +447,14 @@ class Fit:
         parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
         if not cfg.depth_weight:  # the depth maps seeded the sky; the loss does not read them
             views = [replace(v, depth=None) for v in views]
+        shadows = RecordedShadows.of(manifest, cfg.shadow_refresh_every) if tracks else None
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
-                   extent)
+                   extent, shadows)
 
     def train(self, until: int | None = None, progress: bool = True) -> dict:
         """Train to iteration ``until`` (default: the end); :func:`fit_parts`' log."""
         log = fit_parts(self.levels, self.parts, self.cfg, self.iteration, until=until, progress=progress,
-                        keep=self.keep)
+                        keep=self.keep, shadows=self.shadows)
         self.iteration = self.cfg.iters if until is None else min(until, self.cfg.iters)
         return log
 

@@ -9,7 +9,7 @@ never loads a diffusion model for a scene that needs none.
 * no lateral offsets                          -> no restore / refine
 * restorer weights trained on another drive   -> adapt them to this one (its recorded frames)
 * actor outside every frustum in a frame      -> not rendered, not harmonized in that frame
-* no sun                                      -> no shadow region in the harmonization mask
+* no sun                                      -> no cast shadows, no shadow region in the harmonization mask
 * every asset SH degree 0                     -> no SH evaluation (colour is the DC term)
 * stage inputs unchanged since the last run   -> its cached result is reused
 """
@@ -182,15 +182,18 @@ def _has_training_images(manifest: Manifest, cam) -> bool:
     return bool(train) and all(cam.frames[i].image for i in train)
 
 
-def _cast_shadow(manifest: Manifest, visible) -> StageDecision:
-    """Inserted vehicles cast shadows where the scene has a sun (recorded ones carry theirs)."""
+def _cast_shadow(manifest: Manifest, visible, fitted: list[str]) -> StageDecision:
+    """Vehicles cast shadows where the scene has a sun: inserted ones, and recorded ones fitted in
+    their own frames (``fitted``: by this run; or linked splats), since such a fit lays their
+    shadows apart from the background (:mod:`symdrive_core.optim.recorded_shadows`)."""
     sun, why = manifest.effects.casting_sun()
-    casters = {a.id for a in manifest.inserted_actors if a.wlh is not None}  # splats or mesh: all render
+    casters = {a.id for a in manifest.actors if a.wlh is not None and (
+        a.kind == "inserted" or a.splats or a.id in fitted)}  # inserted: splats or mesh, all render
     frames = sorted({fi for cam in visible.values() for fi, ids in cam.items() if casters & set(ids)})
     if sun is None:
         return StageDecision("cast_shadow", False, why)
     if not frames:
-        return StageDecision("cast_shadow", False, "no inserted vehicle (with a size) in any frame")
+        return StageDecision("cast_shadow", False, "no vehicle with a size and Gaussians in any frame")
     seen = sorted({a for cam in visible.values() for fi in frames for a in cam.get(fi, []) if a in casters})
     return StageDecision("cast_shadow", True, why, frames, seen)
 
@@ -276,7 +279,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     shown = {cam: {fi: ids for fi, ids in frames.items() if fi in in_window} for cam, frames in visible.items()}
     stages.append(StageDecision("render", True, "always" if window is None else "the frame window", in_window,
                                 sorted({a for cam in shown.values() for ids in cam.values() for a in ids})))
-    stages.append(_cast_shadow(manifest, shown))
+    stages.append(_cast_shadow(manifest, shown, (stages[0].actors or []) if stages[0].run else []))
     stages.append(_inpaint(manifest, in_window, window is not None))
 
     offsets = [float(o) for o in (eff.lateral_offsets if opt.offsets is None else opt.offsets)]

@@ -94,13 +94,13 @@ class SceneRenderer:
             bg = read_splats(manifest.resolve(manifest.background_splats))
         self.background = None if bg is None else GaussianTensors.from_gaussians(bg, device=self.device)
         self.actors = {}
-        self.sources = {}  # inserted actor id -> Gaussians as read (what its cast shadow is computed from)
+        self.sources = {}  # actor id -> Gaussians as read (what its cast shadow is computed from)
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
             if g is None and (a.splats or a.mesh):
                 g = actor_splats(manifest, a, asset_cache)
             if g is not None:
-                if a.kind == "inserted" and not isinstance(g, GaussianTensors):
+                if not isinstance(g, GaussianTensors):
                     self.sources[a.id] = g
                 self.actors[a.id] = g if isinstance(g, GaussianTensors) else GaussianTensors.from_gaussians(
                     g, device=self.device)
@@ -143,7 +143,7 @@ class SceneRenderer:
                      ratio: float) -> FrameRender:
         """``render`` with the sun shadows of ``actor_ids`` laid on its background
         (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
-        from ..insertion.cast_shadow import combined_occlusion, darken, union, vehicle_shadow_map
+        from ..insertion.cast_shadow import lay_shadows, vehicle_shadow_map
 
         maps = []
         for aid in actor_ids:
@@ -154,14 +154,10 @@ class SceneRenderer:
         maps = [m for m in maps if m is not None]
         if not maps:
             return render
-        cam = self.manifest.camera(camera)
-        cf = cam.frames[frame]
+        cf = self.manifest.camera(camera).frames[frame]
         background = self.render(camera, frame, [])
-        occlusion = combined_occlusion(maps, cf.camera_to_world, cf.K, cam.width, cam.height, background.depth)
-        if not (occlusion > 0).any():
-            return replace(render, shadow=occlusion)
-        vehicles = union(render.instance.values()) if render.instance else np.zeros_like(occlusion, np.float64)
-        rgb = darken(render.rgb, background.rgb, vehicles, occlusion, ratio)
+        rgb, occlusion = lay_shadows(render.rgb, render.instance.values(), background.rgb, background.depth, maps,
+                                     cf.camera_to_world, cf.K, ratio)
         return replace(render, rgb=rgb, shadow=occlusion)
 
 

@@ -139,9 +139,9 @@ class Effects:
         return DEFAULT_SHADOW_RATIO if self.shadow_ratio is None else float(self.shadow_ratio)
 
     def casting_sun(self) -> tuple[np.ndarray | None, str]:
-        """The unit direction sunlight travels when inserted vehicles cast ground shadows (else
+        """The unit direction sunlight travels when vehicles cast ground shadows (else
         None), and why or why not: the one rule the planner's ``cast_shadow`` decision and every
-        renderer of an insertion read."""
+        renderer of a cast shadow read."""
         if self.sun_direction is None:
             return None, "no sun in the scene"
         if not self.shadows:
@@ -149,7 +149,7 @@ class Effects:
         sun = conventions.sun_above_horizon(self.sun_direction)
         if sun is None:
             return None, "sun at or below the horizon"
-        return sun, f"sun present: inserted vehicles cast shadows (shade keeps {self.shade:.2f} of the light)"
+        return sun, f"sun present: vehicles cast shadows (shade keeps {self.shade:.2f} of the light)"
 
 
 @dataclass

@@ -89,4 +89,4 @@ def test_an_insertion_casts_a_shadow_exactly_where_the_plan_says(tmp_path):
         if not casts:  # harmonization may change the car alone
             assert np.array_equal(frame.region, harmonization_region(frame.vehicle_alpha, None))
         reason = make_plan(scene).stage("cast_shadow").reason
-        assert reason == scene.effects.casting_sun()[1] or (casts and "no inserted vehicle" in reason)
+        assert reason == scene.effects.casting_sun()[1] or (casts and "no vehicle with a size" in reason)

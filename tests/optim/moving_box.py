@@ -9,11 +9,13 @@ import torch
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import Gaussians
+from symdrive_core.insertion.cast_shadow import lay_shadows, vehicle_shadow_map
 from symdrive_core.io.images import write_image
 from symdrive_core.io.points import write_points
 from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Actor, Camera, CameraFrame, Frame, Manifest, Pose
 from symdrive_core.scene.camera import CameraView
+from symdrive_core.scene.manifest import DEFAULT_SHADOW_RATIO, Effects
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
 from tests.conftest import look_at_c2w
@@ -62,9 +64,11 @@ def camera_c2w(i: int) -> np.ndarray:
     return look_at_c2w((0.4 * i, -2.0, 1.6), (0.4 * i + 1.0, 6.0, 0.8))
 
 
-def write_moving_box(root):
+def write_moving_box(root, sun=None):
     """Write the package under ``root``; (root, the box's true Gaussians, per frame the truth
-    {rgb, mask, background}, held-out frames)."""
+    {rgb, mask, background}, held-out frames). With ``sun`` (the direction light travels) the box
+    casts its shadow on the recorded images and the scene's effects say so; ``background`` is the
+    street without the box and without its shadow."""
     root.mkdir(parents=True, exist_ok=True)
     scene, box = street(), true_box()
     bg, car = GaussianTensors.from_gaussians(scene), GaussianTensors.from_gaussians(box)
@@ -78,6 +82,11 @@ def write_moving_box(root):
             empty = render_scene(bg, [], view)
         truth[i] = {"rgb": out["rgb"].clamp(0, 1).numpy(), "mask": out["instance"][..., 0].numpy() > 0.5,
                     "background": empty["rgb"].clamp(0, 1).numpy()}
+        if sun is not None:
+            smap = vehicle_shadow_map(box, box_pose(i), WLH, sun)
+            truth[i]["rgb"], truth[i]["shadow"] = lay_shadows(
+                truth[i]["rgb"], [out["instance"][..., 0].numpy()], truth[i]["background"],
+                empty["depth"][..., 0].numpy(), [smap], c2w, K, DEFAULT_SHADOW_RATIO)
         write_image(root / f"img/{i:03d}.png", truth[i]["rgb"])
         frames.append(Frame(i, 0.1 * i))
         cam_frames.append(CameraFrame(K, c2w, conventions.invert_rigid(c2w), f"img/{i:03d}.png"))
@@ -89,6 +98,7 @@ def write_moving_box(root):
     m = Manifest(name="moving-box", frames=frames, cameras=[Camera("front", W, H, cam_frames)], actors=[actor],
                  background_points="points.ply",
                  ground_truth={"train_frames": [i for i in range(N_FRAMES) if i not in heldout],
-                               "heldout_frames": heldout}, root=root)
+                               "heldout_frames": heldout}, root=root,
+                 effects=Effects(shadows=sun is not None, sun_direction=sun))
     m.save(root / "manifest.json")
     return root, box, truth, heldout

@@ -1,0 +1,126 @@
+"""Recorded vehicles' shadows laid while fitting: the shading rule's gradient, when a scene lays
+none, and a drive whose box casts a shadow: the fit learns the street lit, and removing the box
+takes its shadow along."""
+
+import dataclasses
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from symdrive_core.eval.edits import evaluate_decomposition, evaluate_edits
+from symdrive_core.insertion.cast_shadow import shaded
+from symdrive_core.io.images import write_image, write_mask
+from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
+from symdrive_core.optim.recorded_shadows import RecordedShadows
+from symdrive_core.scene import Effects, load_manifest
+from tests.optim.moving_box import write_moving_box
+
+# Light travelling down and towards the recording camera: the box's shadow falls on the floor
+# between them, where every frame sees it.
+SUN = np.array([0.25, -0.6, -0.76]) / np.linalg.norm([0.25, -0.6, -0.76])
+
+
+def test_shading_gradient_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    bg = torch.tensor(rng.uniform(0.05, 0.95, (4, 5, 3)), dtype=torch.float64, requires_grad=True)
+    occ = torch.tensor(rng.uniform(0.0, 1.0, (4, 5)), dtype=torch.float64)
+    ratio = torch.tensor(0.4, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda b, r: shaded(b, occ, r), (bg, ratio))
+
+
+def test_shading_is_identity_where_nothing_occludes_and_scales_linear_light_where_all_does():
+    bg = torch.tensor([[[0.2, 0.5, 0.9]]], dtype=torch.float64)
+    assert torch.equal(shaded(bg, torch.zeros(1, 1, dtype=torch.float64), 0.4), bg)
+    full = shaded(bg, torch.ones(1, 1, dtype=torch.float64), 0.4)
+    lin = lambda x: torch.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)  # noqa: E731
+    assert torch.allclose(lin(full), 0.4 * lin(bg), atol=1e-12)
+
+
+@pytest.mark.parametrize("effects", [Effects(), Effects(shadows=True), Effects(shadows=False, sun_direction=SUN),
+                                     Effects(shadows=True, sun_direction=np.array([0.0, 0.6, 0.8]))])
+def test_a_scene_without_a_casting_sun_lays_no_shadow(tmp_path, effects):
+    root, *_ = write_moving_box(tmp_path / "pkg")
+    m = dataclasses.replace(load_manifest(root), effects=effects)
+    assert RecordedShadows.of(m, 100) is None
+
+
+@pytest.fixture(scope="module")
+def shadowed(tmp_path_factory):
+    """The moving box casting its shadow, with removals of held-out frames 2 and 6 (the truth
+    without the box and without its shadow); fitted twice: with the shadow laid (the scene's sun)
+    and as a scene without shadows fits it (the darkening left to the background)."""
+    root, box, truth, heldout = write_moving_box(tmp_path_factory.mktemp("shadowed") / "pkg", sun=SUN)
+    m = load_manifest(root)
+    edits = []
+    for j, f in enumerate((2, 6)):
+        write_image(root / f"gt/edits/{j}/image.png", truth[f]["background"])
+        write_mask(root / f"gt/edits/{j}/mask.png", truth[f]["mask"])
+        edits.append({"kind": "remove", "actor": "car_1", "camera": "front", "frame": f, "pose": None,
+                      "image": f"gt/edits/{j}/image.png", "mask": f"gt/edits/{j}/mask.png"})
+    vehicles = {}
+    for f, t in truth.items():
+        write_mask(root / f"gt/vehicles/{f:06d}.png", t["mask"])
+        vehicles[str(f)] = f"gt/vehicles/{f:06d}.png"
+    m.ground_truth = {**m.ground_truth, "edits": edits, "vehicles": {"camera": "front", "frames": vehicles}}
+    m.save()
+    unlit = root.parent / "unlit"
+    shutil.copytree(root, unlit)
+    plain = load_manifest(unlit)
+    plain.effects = Effects()
+    plain.save()
+    cfg = ReconstructConfig(iters=600, densify_from=100, densify_every=100, sky_points=0, actor_points=600,
+                            checkpoint_every=10_000, sh_degree=0)
+    laid = reconstruct(load_manifest(root), root / "laid", cfg, progress=False)
+    baked = reconstruct(load_manifest(unlit), unlit / "baked", cfg, progress=False)
+    return load_manifest(root), laid, load_manifest(unlit), baked, truth
+
+
+def test_the_truth_has_a_shadow_outside_the_box(shadowed):
+    *_, truth = shadowed
+    for f in (2, 6):
+        assert (truth[f]["shadow"] > 0.5).sum() > 20 and not (truth[f]["shadow"][truth[f]["mask"]] > 0.5).all()
+
+
+def test_removing_a_box_fitted_with_its_shadow_takes_the_shadow_along(shadowed):
+    m, laid, plain, baked, truth = shadowed
+    with_shadow = evaluate_edits(m, laid.gaussians, laid.actors)["remove"]
+    left_behind = evaluate_edits(plain, baked.gaussians, baked.actors)["remove"]
+    assert with_shadow["psnr_car_and_shadow_dropped"] > left_behind["psnr_car_and_shadow_dropped"] + 2.0
+    # and the recorded drive, shadow included, is rendered no worse than the fit that baked it in
+    ours, theirs = evaluate_decomposition(m, laid.gaussians, laid.actors), evaluate_decomposition(
+        plain, baked.gaussians, baked.actors)
+    assert ours["psnr_image"] > theirs["psnr_image"] - 0.5
+
+
+def test_the_fitted_background_is_lit_where_the_shadow_fell(shadowed):
+    m, laid, plain, baked, truth = shadowed
+    from symdrive_core.eval.views import TrafficRenderer
+
+    def street_error(result, manifest):
+        errors = []
+        for f in (2, 6):
+            rgb, _ = TrafficRenderer(result.gaussians, {}).render(manifest, "front", f)
+            region = truth[f]["shadow"] > 0.5
+            errors.append(np.abs(rgb[region] - truth[f]["background"][region]).mean())
+        return float(np.mean(errors))
+
+    assert street_error(laid, m) < 0.5 * street_error(baked, plain)
+
+
+def test_the_run_casts_the_shadows_of_recorded_vehicles_fitted_in_their_own_frames(shadowed):
+    from symdrive_core.metrics import psnr
+    from symdrive_core.pipeline.plan import make_plan
+    from symdrive_core.pipeline.scene_render import SceneRenderer
+
+    m, laid, plain, _, truth = shadowed
+    stage = make_plan(m).stage("cast_shadow")
+    assert stage.run and stage.actors == ["car_1"]  # the run's own fit decomposes the box
+    assert not make_plan(plain).stage("cast_shadow").run
+    renderer = SceneRenderer(m, background_gaussians=laid.gaussians, actor_gaussians=laid.actors)
+    for f in (2, 6):
+        frame = renderer.render("front", f)
+        cast = renderer.cast_shadows("front", f, frame, ["car_1"], m.effects.casting_sun()[0], m.effects.shade)
+        assert cast.shadow is not None and (cast.shadow > 0.5).sum() > 20
+        assert psnr(cast.rgb, truth[f]["rgb"]) > psnr(frame.rgb, truth[f]["rgb"]) + 2.0
