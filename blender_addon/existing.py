@@ -50,7 +50,8 @@ def _check_free(scene, existing) -> None:
 
 
 def build_existing(context, manifest, actor, bg: np.ndarray, frames, max_points: int = 0) -> bpy.types.Object:
-    """One existing actor: its root keyed on ``actor.poses`` at ``frames``, its parts, its recorded track."""
+    """One existing actor: its root keyed on ``actor.poses`` at ``frames``, its parts, its recorded
+    track and, when a reconstruction refined it, its tracked boxes."""
     collection = context.collection
     root = bpy.data.objects.new(actor.id, None)
     root.empty_display_type, root.empty_display_size = "ARROWS", 1.0
@@ -65,6 +66,8 @@ def build_existing(context, manifest, actor, bg: np.ndarray, frames, max_points:
         actors.measure_and_ground(root, actor.wlh)
         _key_track(root, actor.poses, bg, frames)
         s.recorded_poses = recorded.encode(frames[0], actor.recorded_poses or actor.poses)
+        if actor.tracked_poses is not None:
+            s.tracked_poses = recorded.encode(frames[0], actor.tracked_poses)
     except BaseException:
         _remove(root)
         raise

@@ -285,11 +285,13 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
 def _manifest_actor(a: _Actor, poses, asset: _AssetPaths, frame_numbers) -> scene_pkg.Actor:
     s = a.root.symdrive
     wlh = np.array(s.wlh) if min(s.wlh) > 0 else None
-    recorded_poses = None
+    recorded_poses = tracked_poses = None
     if s.kind == "existing" and s.recorded_poses:
         poses, recorded_poses = recorded.against_recorded(
             poses, recorded.at_frames(s.recorded_poses, frame_numbers)
         )
+    if s.kind == "existing" and s.tracked_poses:
+        tracked_poses = recorded.at_frames(s.tracked_poses, frame_numbers)
     return scene_pkg.Actor(
         id=s.actor_id,
         kind=s.kind,
@@ -299,6 +301,7 @@ def _manifest_actor(a: _Actor, poses, asset: _AssetPaths, frame_numbers) -> scen
         wlh=wlh,
         instance_id=s.instance_id,
         recorded_poses=recorded_poses,
+        tracked_poses=tracked_poses,
     )
 
 

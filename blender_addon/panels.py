@@ -60,6 +60,8 @@ class SYMDRIVE_PT_object(_Sidebar, bpy.types.Panel):
             layout.label(text=f"Instance id {s.instance_id}, ground offset {s.ground_offset:.3f} m")
             if s.recorded_poses:
                 layout.label(text="Recorded vehicle: changes export as edits of its track", icon="INFO")
+            if s.tracked_poses:
+                layout.label(text="Poses refined from its tracks (kept on export)")
             row = layout.row(align=True)
             row.operator("symdrive.remove_vehicle", icon="HIDE_ON")
             row.operator("symdrive.shift_vehicle_keys", icon="TIME")

@@ -67,6 +67,12 @@ class SymDriveObjectSettings(bpy.types.PropertyGroup):
         description="An existing actor's track as the drive recorded it (JSON, see recorded.py): "
         "export compares its poses with it",
     )
+    tracked_poses: StringProperty(
+        name="Tracked poses",
+        options={"HIDDEN"},
+        description="An existing actor's boxes as the tracker gave them, when a reconstruction refined its "
+        "poses (JSON, as recorded poses): exported with it, so a later refinement starts from them",
+    )
     # cameras
     export: BoolProperty(name="Export", default=True, description="Export this camera in scene packages")
 

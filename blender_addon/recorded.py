@@ -4,6 +4,7 @@ A vehicle the drive recorded is imported keyed on its poses; the track it was re
 on the actor root (``symdrive.recorded_poses``, JSON) in the package's frame: the Blender frame of
 the package's first frame and one pose (or null) per package frame. Export compares the poses it
 evaluates with that track, so the backend learns what the artist removed, moved or retimed.
+A refined actor's tracked boxes (``symdrive.tracked_poses``) are kept the same way and exported as kept.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ def encode(frame_start: int, poses: list) -> str:
 
 
 def at_frames(text: str, frame_numbers) -> list:
-    """The recorded pose at each Blender frame of ``frame_numbers`` (None outside the recorded span)."""
+    """The kept pose at each Blender frame of ``frame_numbers`` (None outside the kept span)."""
     data = json.loads(text)
     start, poses = data["frame_start"], data["poses"]
     out = []

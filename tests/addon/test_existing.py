@@ -132,6 +132,22 @@ def test_removed_moved_and_retimed_export_as_edits(imported, tmp_path):
 
 
 @pytest.mark.blender
+def test_a_refined_vehicle_keeps_its_tracked_boxes_through_export(blender, tmp_path):
+    """A later refinement starts from the tracker's boxes: the export keeps them for its frames."""
+    package = write_package(tmp_path / "drive")
+    d = json.loads((package / "manifest.json").read_text())
+    d["actors"][0]["tracked_poses"] = [_pose(8.2 + 0.5 * i, -1.3, 0.7, 0.04 * i) for i in range(N - 1)] + [None]
+    (package / "manifest.json").write_text(json.dumps(d))
+    tracked = load_manifest(package).actor(CAR).tracked_poses
+    import_package(blender, package)
+    start = blender.context.scene.frame_start
+    m = export(blender, tmp_path / "out", write_masks=False, frame_start=start + 1, frame_end=start + N - 1)
+    assert_same(m.actor(CAR).tracked_poses, tracked[1:])
+    assert m.actor(CAR).recorded_poses is None  # unedited: its poses are the refined ones
+    assert m.actor(VAN).tracked_poses is None
+
+
+@pytest.mark.blender
 def test_export_into_the_package_itself_keeps_its_asset_paths(imported):
     blender, package, source, _ = imported
     m = export(blender, package, write_masks=False)
