@@ -35,7 +35,7 @@ def shifted_views(views: list[View], render: SplatRenderer, offset_m: float) -> 
     for v in views:
         camera = v.camera.shifted(offset_m)
         out.append(View(v.frame, v.K, torch.tensor(camera.world_to_camera, dtype=torch.float32),
-                        torch.from_numpy(render(camera)), None, v.width, v.height))
+                        torch.from_numpy(render(camera)), None, v.width, v.height, v.camera_name))
     return out
 
 

@@ -26,21 +26,31 @@ from .lane_paint import lane_truth
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
                      camera: str | None = None, actors: dict[str, Gaussians] | None = None) -> dict:
-    """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames; with
-    ``actors`` (a decomposed reconstruction's recorded vehicles, by actor id) they are rendered
-    where the drive saw them."""
+    """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames of
+    ``camera``, else of every camera a reconstruction trains on (then also "cameras": the same
+    per camera); with ``actors`` (a decomposed reconstruction's recorded vehicles, by actor id)
+    they are rendered where the drive saw them."""
+    from ..optim.views import training_cameras
+
     frames = split_frames(manifest)[1] if frames is None else list(frames)
     if not frames:
         raise ValueError("evaluate_heldout: the package holds out no frames")
-    cam = manifest.camera(camera) if camera else manifest.cameras[0]
-    render, scores = recorded_renderer(manifest, gaussians, actors), []
-    for i in frames:
-        cf = cam.frames[i]
-        pred = render(CameraView.of_frame(cam, i), i)
-        gt = read_image(manifest.resolve(cf.image), channels=3)
-        scores.append((psnr(pred, gt), ssim(pred, gt)))
-    p, s = np.mean(scores, axis=0)
-    return {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
+    cams = [manifest.camera(camera)] if camera else training_cameras(manifest) or manifest.cameras[:1]
+    render, by_camera = recorded_renderer(manifest, gaussians, actors), {}
+    for cam in cams:
+        scores = []
+        for i in frames:
+            pred = render(CameraView.of_frame(cam, i), i)
+            gt = read_image(manifest.resolve(cam.frames[i].image), channels=3)
+            scores.append((psnr(pred, gt), ssim(pred, gt)))
+        by_camera[cam.name] = scores
+    p, s = np.mean([x for scores in by_camera.values() for x in scores], axis=0)
+    out = {"psnr_heldout": round(float(p), 3), "ssim_heldout": round(float(s), 4), "frames": len(frames)}
+    if len(cams) > 1:
+        out["cameras"] = {name: {"psnr_heldout": round(float(np.mean([x[0] for x in v])), 3),
+                                 "ssim_heldout": round(float(np.mean([x[1] for x in v])), 4)}
+                          for name, v in by_camera.items()}
+    return out
 
 
 def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str, Gaussians] | None):

@@ -6,8 +6,9 @@ trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the pac
 maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
 with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
 step by step, clone/split/prune density control, and optionally images coarse to fine
-(``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every k-th frame of the
-drive is held out for evaluation. Checkpoints are a splat PLY plus the optimizer state in
+(``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every camera that recorded images
+trains (a rig's cameras see the street from places one camera never is); every k-th frame of the
+drive is held out for evaluation, from every camera. Checkpoints are a splat PLY plus the optimizer state in
 safetensors, so ``--resume`` continues exactly where a run stopped.
 """
 
@@ -36,7 +37,7 @@ from .config import DensifyConfig, ReconstructConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .losses import photometric
 from .recorded_shadows import RecordedShadows
-from .views import Levels, View, load_views
+from .views import Levels, View, load_views, training_cameras
 
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
 
@@ -417,7 +418,7 @@ class Fit:
     :func:`reconstruct` runs to the end at once and a benchmark runs in segments, scoring between
     them (``iteration`` advances with each :meth:`train`)."""
 
-    cfg: ReconstructConfig  # the depth weight resolved for the camera it trains on
+    cfg: ReconstructConfig  # the depth weight resolved for the cameras it trains on (the largest)
     levels: Levels
     parts: list[Part]
     keep: Callable[[Part], np.ndarray] | None
@@ -431,7 +432,9 @@ class Fit:
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
         """The background, and with ``cfg.decompose`` one part per recorded vehicle; checkpointed
         under ``out`` (None: not at all)."""
-        cfg = replace(cfg, depth_weight=cfg.depth_weight_for(manifest.cameras[0]))  # the camera load_views trains on
+        cameras = training_cameras(manifest) or manifest.cameras[:1]
+        weights = {c.name: cfg.depth_weight_for(c) for c in cameras}
+        cfg = replace(cfg, depth_weight=max(weights.values()))
         train_frames, heldout = split_frames(manifest, cfg.holdout_every)
         views = load_views(manifest, train_frames, depth=True)
         tracks = decompose.tracks(manifest) if cfg.decompose else []
@@ -445,8 +448,8 @@ class Fit:
         extent, centre = scene_extent(views)
         background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
         parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
-        if not cfg.depth_weight:  # the depth maps seeded the sky; the loss does not read them
-            views = [replace(v, depth=None) for v in views]
+        # the depth maps seeded the sky; the loss reads those of the cameras it weighs
+        views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, cfg.shadow_refresh_every) if tracks else None
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
                    extent, shadows)
@@ -492,7 +495,8 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": run.train_frames, "heldout_frames": run.heldout_frames,
-               "extent_m": round(run.extent, 3), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
+               "extent_m": round(run.extent, 3), "cameras": sorted({v.camera_name for v in run.levels.views}),
+               "views": len(run.levels.views), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")

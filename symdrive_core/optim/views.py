@@ -35,6 +35,7 @@ class View:
     depth: torch.Tensor | None  # [H,W] metres, +inf = sky, NaN = unmeasured (scene/depth.py)
     width: int
     height: int
+    camera_name: str  # the package camera that recorded it
 
     @property
     def image(self) -> torch.Tensor:
@@ -58,20 +59,30 @@ def held_pixels(image: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32))
 
 
+def training_cameras(manifest: Manifest) -> list:
+    """The package's cameras that recorded images: what a reconstruction trains on (a camera
+    with no image at all, such as a rendered viewpoint, has nothing to fit)."""
+    return [c for c in manifest.cameras if any(cf.image for cf in c.frames)]
+
+
 def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:
-    cam = manifest.camera(camera) if camera else manifest.cameras[0]
+    """The recorded views of ``frames``, frame by frame: of ``camera``, else of every camera that
+    recorded images (:func:`training_cameras`; each must have an image at each frame)."""
+    cams = [manifest.camera(camera)] if camera else training_cameras(manifest) or manifest.cameras[:1]
     views = []
     for i in frames:
-        cf = cam.frames[i]
-        if cf.image is None:
-            raise InputError(manifest.path or manifest.root, "frame has no image to train on",
-                             f"cameras.{cam.name}.frames[{i}].image")
-        img = held_pixels(read_image(manifest.resolve(cf.image), channels=3))
-        d = read_depth(manifest, cam, i) if depth else None
-        if d is not None:
-            d = torch.from_numpy(d)
-        views.append(View(i, torch.tensor(cf.K, dtype=torch.float32),
-                          torch.tensor(cf.world_to_camera, dtype=torch.float32), img, d, cam.width, cam.height))
+        for cam in cams:
+            cf = cam.frames[i]
+            if cf.image is None:
+                raise InputError(manifest.path or manifest.root, "frame has no image to train on",
+                                 f"cameras.{cam.name}.frames[{i}].image")
+            img = held_pixels(read_image(manifest.resolve(cf.image), channels=3))
+            d = read_depth(manifest, cam, i) if depth else None
+            if d is not None:
+                d = torch.from_numpy(d)
+            views.append(View(i, torch.tensor(cf.K, dtype=torch.float32),
+                              torch.tensor(cf.world_to_camera, dtype=torch.float32), img, d, cam.width, cam.height,
+                              cam.name))
     return views
 
 
@@ -107,7 +118,8 @@ def downscaled(view: View, factor: int) -> View:
     image = _blocks(view.image, factor).mean(2)
     depth = None if view.depth is None else block_depth(view.depth, factor)
     K = torch.tensor(scale_intrinsics(view.K.double().numpy(), 1.0 / factor), dtype=torch.float32)
-    return View(view.frame, K, view.viewmat, image, depth, view.width // factor, view.height // factor)
+    return View(view.frame, K, view.viewmat, image, depth, view.width // factor, view.height // factor,
+                view.camera_name)
 
 
 class Levels:

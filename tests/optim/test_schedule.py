@@ -40,7 +40,7 @@ def test_an_eight_bit_image_is_held_as_uint8_and_read_back_exactly():
     image = (levels / 255.0).astype(np.float32)
     held = held_pixels(image)
     assert held.dtype == torch.uint8
-    view = View(0, torch.eye(3), torch.eye(4), held, None, 6, 4)
+    view = View(0, torch.eye(3), torch.eye(4), held, None, 6, 4, "front")
     assert view.image.dtype == torch.float32 and np.allclose(view.image.numpy(), image, atol=1e-7)
     assert held_pixels(image + 0.1 / 255).dtype == torch.float32  # not 8-bit levels: kept as it is
 
@@ -54,7 +54,7 @@ def test_a_coarse_level_is_the_area_average_with_k_scaled_about_pixel_edges():
     rng = np.random.default_rng(1)
     image = rng.random((9, 13, 3)).astype(np.float32)  # odd sides: the last row and column are cropped
     K = torch.tensor([[10.0, 0, 6.5], [0, 10.0, 4.5], [0, 0, 1]])
-    view = View(0, K, torch.eye(4), torch.from_numpy(image), None, 13, 9)
+    view = View(0, K, torch.eye(4), torch.from_numpy(image), None, 13, 9, "front")
     half = downscaled(view, 2)
     assert (half.width, half.height) == (6, 4) and half.image.shape == (4, 6, 3)
     assert np.allclose(half.image[1, 2].numpy(), image[2:4, 4:6].mean((0, 1)))
@@ -70,7 +70,7 @@ def test_a_half_resolution_render_with_scaled_k_matches_the_area_averaged_full_r
     with torch.no_grad():
         full = render_params(params, view.K, view.viewmat, W, H, truth.sh_degree)[0]
         small = render_params(params, half.K, half.viewmat, half.width, half.height, truth.sh_degree)[0]
-    pooled = downscaled(View(0, view.K, view.viewmat, full, None, W, H), 2).image
+    pooled = downscaled(View(0, view.K, view.viewmat, full, None, W, H, "front"), 2).image
     shifted = torch.roll(small, 1, dims=1)  # a half-pixel error in K would show as a shift
     assert (small - pooled).abs().mean() < 0.5 * (shifted - pooled)[:, 1:].abs().mean()
 
@@ -84,7 +84,7 @@ def test_a_coarse_depth_block_is_a_surface_sky_or_unmeasured():
 
 
 def test_levels_compute_a_coarse_level_once_and_drop_it_for_the_next():
-    views = [View(0, torch.eye(3), torch.eye(4), torch.zeros(8, 8, 3), None, 8, 8)]
+    views = [View(0, torch.eye(3), torch.eye(4), torch.zeros(8, 8, 3), None, 8, 8, "front")]
     levels = Levels(views)
     quarter = levels.at(4)
     assert quarter[0].width == 2 and levels.at(4) is quarter
