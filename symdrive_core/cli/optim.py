@@ -74,7 +74,7 @@ def _reconstruct(args) -> int:
     import json
 
     from ..optim.pose_refine import with_refined
-    from ..optim.reconstruct import reconstruct
+    from ..optim.reconstruct import SHADOW_SUFFIX, reconstruct
     from ..scene import ManifestError, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
@@ -101,7 +101,7 @@ def _reconstruct(args) -> int:
 
         if metrics["heldout_frames"]:
             metrics["heldout"] = evaluate_heldout(manifest, result.gaussians, metrics["heldout_frames"],
-                                                  actors=result.actors)
+                                                  actors=result.actors, shadows=result.shadows)
         if args.lateral:
             metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
         write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")
@@ -112,6 +112,8 @@ def _reconstruct(args) -> int:
         for a in manifest.actors:
             if a.id in result.actors:
                 a.splats = (Path(out) / "actors" / f"{a.id}.ply").resolve().relative_to(root).as_posix()
+                a.shadow = (Path(out) / "actors" / f"{a.id}{SHADOW_SUFFIX}").resolve().relative_to(root).as_posix() \
+                    if a.id in result.shadows else None
         manifest.save()
     summary = {k: metrics[k] for k in ("gaussians", "actors", "seconds", "seconds_per_iteration", "heldout", "lateral")
                if k in metrics and metrics[k] != {}}

@@ -36,14 +36,15 @@ def _mean(values) -> float | None:
 
 
 def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
-                           frames: list[int] | None = None) -> dict:
+                           frames: list[int] | None = None, shadows: dict | None = None) -> dict:
     """Held-out frames: PSNR over the image, over the moving vehicles' pixels and elsewhere (the
-    truth's vehicle masks), the recorded vehicles at their recorded poses."""
+    truth's vehicle masks), the recorded vehicles at their recorded poses with their ``shadows``
+    (shadow layers, by actor id)."""
     require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
     masks = vehicle_masks(manifest)
     frames = [f for f in (split_frames(manifest)[1] if frames is None else frames) if f in masks]
     cam = manifest.cameras[0]
-    renderer = TrafficRenderer(background, actors)
+    renderer = TrafficRenderer(background, actors, shadows)
     rows = {"image": [], "vehicles": [], "elsewhere": []}
     for f in frames:
         rgb, _ = renderer.render(manifest, cam.name, f, recorded=True)
@@ -80,15 +81,16 @@ def edited(manifest: Manifest, edit: EditTruth) -> Manifest:
 
 
 def evaluate_edits(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
-                   inpaint: Inpainter | None = None, dilate_px: int = 2) -> dict:
+                   inpaint: Inpainter | None = None, dilate_px: int = 2, shadows: dict | None = None) -> dict:
     """Per edit kind, the edited frame against Cycles' (``ground_truth.edits``): PSNR over the
     region the edit exposes (remove: the car's recorded pixels, and those with its shadow,
     :func:`removed_shadow`; move, retime: where it was and no vehicle is now) and, for move and
     retime, over the car where the truth shows it now; as
     rendered ("dropped": the car's Gaussians moved or gone) and, with ``inpaint``, with the exposed
-    region inpainted."""
+    region inpainted. The vehicles lay their ``shadows`` (shadow layers, by actor id) where
+    they are."""
     require_truth(manifest, "edits", "scoring edits needs their Cycles renders")
-    renderer = TrafficRenderer(background, actors)
+    renderer = TrafficRenderer(background, actors, shadows)
     rows: dict[str, dict[str, list]] = {}
     for e in edit_truth(manifest):
         m = edited(manifest, e)

@@ -19,7 +19,6 @@ from tqdm import tqdm
 
 from ..insertion.assets import load_vehicle_asset
 from ..insertion.baselines import naive, reinhard_transfer
-from ..insertion.cast_shadow import vehicle_shadow
 from ..insertion.features import crop_frechet, vehicle_crop
 from ..insertion.harmonizer import Harmonizer, restorer_harmonizer
 from ..insertion.insert import InsertionConfig, finetune_sample, insert_frame
@@ -30,6 +29,7 @@ from ..metrics import psnr, ssim
 from ..optim.finetune import finetune_colors
 from ..scene import Manifest
 from ..scene.ground_truth import require_truth, split_frames
+from ..shadows.cast import vehicle_shadow
 
 METHODS = ("naive", "color_transfer", "cast_shadow", "harmonized", "finetuned", "finetuned_shadow")
 

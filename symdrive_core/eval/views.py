@@ -25,18 +25,19 @@ from .lane_paint import lane_truth
 
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
-                     camera: str | None = None, actors: dict[str, Gaussians] | None = None) -> dict:
+                     camera: str | None = None, actors: dict[str, Gaussians] | None = None,
+                     shadows: dict | None = None) -> dict:
     """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames of
     ``camera``, else of every camera a reconstruction trains on (then also "cameras": the same
     per camera); with ``actors`` (a decomposed reconstruction's recorded vehicles, by actor id)
-    they are rendered where the drive saw them."""
+    they are rendered where the drive saw them, with their ``shadows`` (shadow layers, by actor id)."""
     from ..optim.views import training_cameras
 
     frames = split_frames(manifest)[1] if frames is None else list(frames)
     if not frames:
         raise ValueError("evaluate_heldout: the package holds out no frames")
     cams = [manifest.camera(camera)] if camera else training_cameras(manifest) or manifest.cameras[:1]
-    render, by_camera = recorded_renderer(manifest, gaussians, actors), {}
+    render, by_camera = recorded_renderer(manifest, gaussians, actors, shadows), {}
     for cam in cams:
         scores = []
         for i in frames:
@@ -53,58 +54,52 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     return out
 
 
-def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str, Gaussians] | None):
-    """``(view, frame) -> [H, W, 3]``: the background, plus ``actors`` at their recorded poses
-    (the parameters converted once, not per frame)."""
+def recorded_renderer(manifest: Manifest, gaussians: Gaussians, actors: dict[str, Gaussians] | None,
+                      shadows: dict | None = None):
+    """``(view, frame) -> [H, W, 3]``: the background, plus ``actors`` at their recorded poses with
+    their ``shadows`` (the parameters converted once, not per frame)."""
     if not actors:
         static = SplatRenderer(gaussians)
         return lambda view, frame: static(view)
-    scene = TrafficRenderer(gaussians, actors)
+    scene = TrafficRenderer(gaussians, actors, shadows)
     return lambda view, frame: scene.render(manifest, None, frame, view=view, recorded=True)[0]
 
 
 class TrafficRenderer:
     """Background plus recorded vehicles (by actor id), each Gaussian set converted once; where the
-    scene has a sun, each vehicle lays its shadow on the background (as the fit laid it,
-    :mod:`symdrive_core.optim.recorded_shadows`)."""
+    scene has a sun, each vehicle with a shadow layer (``shadows``, by actor id: what a decomposed
+    fit learnt, :mod:`symdrive_core.optim.recorded_shadows`) lays it on the background."""
 
-    def __init__(self, background: Gaussians, actors: dict[str, Gaussians]):
+    def __init__(self, background: Gaussians, actors: dict[str, Gaussians], shadows: dict | None = None):
         self.background = GaussianTensors.from_gaussians(background)
-        self.sources = dict(actors)
         self.actors = {k: GaussianTensors.from_gaussians(g) for k, g in actors.items()}
+        self.shadows = dict(shadows or {})
 
     @torch.no_grad()
     def render(self, manifest: Manifest, camera: str | None, frame: int, *, view: CameraView | None = None,
                recorded: bool = False):
         """(rgb [H, W, 3], actor id -> alpha [H, W]) of ``manifest``'s actors at ``frame``, seen by
         ``camera`` at that frame (or ``view``): as edited, or where the drive saw them (``recorded``)."""
-        placed, ids, casters = [], {}, []
+        placed, ids, maps = [], {}, []
         for a in manifest.actors:
             pose = a.recorded_pose(frame) if recorded else a.pose(frame)
             if a.id in self.actors and pose is not None:
                 placed.append((self.actors[a.id], pose, a.instance_id))
                 ids[a.instance_id] = a.id
-                if a.wlh is not None:
-                    casters.append((self.sources[a.id], pose, a.wlh))
+                if a.id in self.shadows and a.wlh is not None:
+                    maps.append(self.shadows[a.id].at(pose, a.wlh))
         view = view or CameraView.of_frame(manifest.camera(camera), frame)
         out = render_scene(self.background, placed, view)
         alphas = {ids[iid]: out["instance"][..., k].numpy() for k, iid in enumerate(out["actor_ids"])}
         rgb = out["rgb"].clamp(0, 1).numpy()
-        sun, _ = manifest.effects.casting_sun()
-        if sun is not None and casters:
-            rgb = self._with_shadows(rgb, alphas, casters, view, sun, manifest.effects.shade)
+        if maps and manifest.effects.casting_sun()[0] is not None:
+            from ..shadows.cast import lay_shadows
+
+            street = render_scene(self.background, [], view)
+            rgb, _ = lay_shadows(rgb, alphas.values(), street["rgb"].clamp(0, 1).numpy(),
+                                 street["depth"][..., 0].numpy(), maps, view.camera_to_world, view.K,
+                                 manifest.effects.shade)
         return rgb, alphas
-
-    def _with_shadows(self, rgb, alphas, casters, view: CameraView, sun, ratio: float) -> np.ndarray:
-        from ..insertion.cast_shadow import lay_shadows, vehicle_shadow_map
-
-        maps = [m for m in (vehicle_shadow_map(g, pose, wlh, sun) for g, pose, wlh in casters) if m is not None]
-        if not maps:
-            return rgb
-        street = render_scene(self.background, [], view)
-        shaded, _ = lay_shadows(rgb, alphas.values(), street["rgb"].clamp(0, 1).numpy(), street["depth"][..., 0].numpy(),
-                                maps, view.camera_to_world, view.K, ratio)
-        return shaded
 
     @torch.no_grad()
     def street_depth(self, manifest: Manifest, camera: str, frame: int) -> np.ndarray:

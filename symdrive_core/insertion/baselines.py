@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..conventions import linear_to_srgb, srgb_to_linear
+from ..shadows.region import dilate
 from ..splat.constants import ALPHA_THRESHOLD
-from .shadow import dilate
 
 _RGB_TO_LMS = np.array([[0.3811, 0.5783, 0.0402], [0.1967, 0.7244, 0.0782], [0.0241, 0.1288, 0.8444]])
 _LMS_TO_LAB = np.diag([1 / np.sqrt(3), 1 / np.sqrt(6), 1 / np.sqrt(2)]) @ np.array(

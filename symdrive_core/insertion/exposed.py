@@ -17,7 +17,7 @@ import numpy as np
 from ..optim.decompose import Track, tracks
 from ..scene import Manifest
 from ..scene.camera import CameraView
-from .shadow import dilate
+from ..shadows.region import dilate
 
 VEHICLE_ALPHA = 0.5  # a pixel belongs to a vehicle where its accumulated alpha is at least this
 

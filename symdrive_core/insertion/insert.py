@@ -2,7 +2,7 @@
 
 The vehicle is placed in the world (:func:`~.place.place`) and seen through a frozen view
 (:mod:`symdrive_core.splat.frozen_view`: projected once, its SH evaluated in its own frame); where
-the scene has a sun it casts its shadow (:mod:`.cast_shadow`), and the region harmonization may
+the scene has a sun it casts its shadow (:mod:`symdrive_core.shadows.cast`), and the region harmonization may
 change is the vehicle plus that shadow. :mod:`.evaluate` scores what this produces.
 """
 
@@ -17,12 +17,12 @@ from ..metrics import bbox_crop
 from ..optim.finetune import FinetuneSample
 from ..scene import Manifest, Pose
 from ..scene.camera import CameraView
+from ..scene.place import place
+from ..shadows.cast import CastShadow, vehicle_shadow
+from ..shadows.region import dilate, harmonization_region, shadow_region
 from ..splat.frozen_view import FrozenView
 from ..splat.tensors import GaussianTensors
-from .cast_shadow import CastShadow, vehicle_shadow
 from .config import InsertionConfig
-from .place import place
-from .shadow import dilate, harmonization_region, shadow_region
 
 
 def insertion_view(camera: CameraView, background: GaussianTensors | None, vehicle: Gaussians, pose: Pose,

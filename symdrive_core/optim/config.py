@@ -71,9 +71,9 @@ class ReconstructConfig:
     actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
     actor_max_gaussians: int = 40_000
     pose_refine: PoseRefineConfig = field(default_factory=PoseRefineConfig)
-    # Where the scene has a sun, the recorded vehicles' shadows are laid on the background while
-    # fitting (:mod:`.recorded_shadows`); their shadow maps are rebuilt every this many iterations.
-    shadow_refresh_every: int = 100
+    # Where the scene has a sun, each recorded vehicle's shadow is a layer fitted with the
+    # Gaussians (:mod:`.recorded_shadows`), at this learning rate on its occlusion logits.
+    shadow_lr: float = 0.05
 
     def downscale_at(self, it: int) -> int:
         """The factor the training images are downscaled by at iteration ``it`` (a power of 2)."""

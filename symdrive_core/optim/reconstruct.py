@@ -31,6 +31,7 @@ from ..io.points import read_points
 from ..scene import Manifest
 from ..scene.depth import is_sky, measured
 from ..scene.ground_truth import split_frames
+from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
 from . import decompose, pose_refine
 from .config import DensifyConfig, ReconstructConfig
@@ -39,6 +40,7 @@ from .losses import photometric
 from .recorded_shadows import RecordedShadows
 from .views import Levels, View, load_views, training_cameras
 
+SHADOW_SUFFIX = ".shadow.safetensors"  # a recorded vehicle's shadow layer, beside its actors/<id>.ply
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
 
 
@@ -298,7 +300,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         degree = cfg.sh_degree_at(it)
         rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0 or shadows is not None)
         if shadows is not None:
-            rgb = shadows.apply(rgb, info, view, present, it)
+            rgb = shadows.apply(rgb, info, view, present)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if depth_weight > 0:
             dl = depth_loss(info, alpha, view.depth)
@@ -308,6 +310,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
             loss = loss + r.penalty(n_views)
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
+        if shadows is not None:
+            shadows.zero_grad()
         means2d = info["means2d"]
         means2d.retain_grad()
         loss.backward()
@@ -320,6 +324,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 row += n
         for part in parts:
             part.opt.step()
+        if shadows is not None:
+            shadows.step()
         for r in refining:
             r.step(it)
         step = it + 1
@@ -337,6 +343,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                     part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
                     if part.refine is not None:
                         part.refine.save(part.checkpoint.folder)
+            if shadows is not None and parts[0].checkpoint is not None:
+                shadows.save(parts[0].checkpoint.folder / "actors")
     bar.close()
     if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
         # for the result too
@@ -373,6 +381,7 @@ class ReconstructResult:
     output: Path
     actors: dict[str, Gaussians] = field(default_factory=dict)  # recorded vehicles, each in its own frame
     poses: dict[str, list] = field(default_factory=dict)  # tracked vehicles' refined poses, per frame
+    shadows: dict[str, ShadowLayer] = field(default_factory=dict)  # recorded vehicles' shadow layers
 
 
 def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path | None,
@@ -450,7 +459,9 @@ class Fit:
         parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
         # the depth maps seeded the sky; the loss reads those of the cameras it weighs
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
-        shadows = RecordedShadows.of(manifest, cfg.shadow_refresh_every) if tracks else None
+        shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
+        if shadows is not None and resume and checkpoint is not None:
+            shadows.load(checkpoint.folder / "actors")
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
                    extent, shadows)
 
@@ -475,8 +486,9 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     """Fit the training frames: background Gaussians, and with ``cfg.decompose`` one set per
     recorded vehicle (``existing`` actors with a box) in its own frame. Writes
     ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/``, ``out/metrics.json``
-    (the fit: iterations, timings, frames) and, where tracked vehicles' poses were refined
-    (:mod:`.pose_refine`), ``out/poses.json``. Scoring the result is the caller's
+    (the fit: iterations, timings, frames), where tracked vehicles' poses were refined
+    (:mod:`.pose_refine`), ``out/poses.json``, and where the scene has a sun each vehicle's shadow
+    layer (:mod:`.recorded_shadows`), ``out/actors/<id>.shadow.safetensors``. Scoring the result is the caller's
     (``eval.views.evaluate_heldout`` on the held-out frames, ``pose_refine.with_refined`` placing
     the vehicles where they were fitted)."""
     out = Path(out)
@@ -491,6 +503,9 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     poses = run.poses()
     if poses:
         pose_refine.write_refined(out, poses)
+    shadows = run.shadows.fitted() if run.shadows is not None else {}
+    for name, layer in shadows.items():
+        layer.save(out / "actors" / f"{name}{SHADOW_SUFFIX}")
     corrections = {p.name: {"pose_correction": p.refine.corrections()} for p in run.parts if p.refine is not None}
     metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
@@ -500,4 +515,4 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()}}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-    return ReconstructResult(g, metrics, out, actors, poses)
+    return ReconstructResult(g, metrics, out, actors, poses, shadows)

@@ -1,83 +1,128 @@
-"""Recorded vehicles' sun shadows laid on the background while it is fitted.
+"""Recorded vehicles' sun shadows fitted with the background, as layers that move with them.
 
 Where the scene has a sun (``effects.casting_sun``), a recorded car darkens the road it passes. A
 background fitted to the drive as recorded learns that darkening as the road's colour, and the
-shadow stays on the street when the car is removed or moved. So a decomposed fit renders each
-training view as the renderers do afterwards: the background and the recorded vehicles at their
-poses, with each vehicle's shadow (from its own Gaussians as they stand,
-:mod:`symdrive_core.insertion.cast_shadow`) laid on the background at the scene's shadow ratio.
-The background then learns the road in sunlight; the darkening is the car's, and goes where it
-goes.
-
-A shadow map is a rasterization of the vehicle's Gaussians along the sun, so the maps of every
-(vehicle, frame) are kept and rebuilt every ``refresh_every`` iterations, as the vehicles' shapes
-and poses settle; the pixels' ground points and the depth test (a wall in front of the shadowed
-ground stays lit) are evaluated per step against the rendered depth.
+shadow stays on the street when the car is removed or moved. So a decomposed fit gives each
+recorded vehicle a shadow layer (:class:`symdrive_core.shadows.layer.ShadowLayer`: an
+occlusion grid on the ground in its own frame) and renders each training view as the renderers
+do afterwards: the background and the vehicles at their poses, each layer laid on the background
+at the scene's shadow ratio (:func:`symdrive_core.shadows.cast.shaded`). The layers'
+logits are fitted with the Gaussians (Adam), so the darkening that moves with a car is learnt as
+its shadow, and the background behind it as the road in sunlight.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from ..gaussians import Gaussians
-from ..insertion.cast_shadow import ShadowMap, combined_occlusion, shaded, vehicle_shadow_map
+from ..gaussians import logit
 from ..scene import Manifest
 from ..scene.poses import Pose
+from ..shadows.cast import occlusion_image, shaded, union
+from ..shadows.layer import ShadowLayer
 
-MAP_CELL_M = 0.03  # the shadow maps' finest cell while fitting: about a near road pixel of a driving camera
+LAYER_FILE = "shadow.safetensors"  # a layer's checkpoint, beside its vehicle's
 
 
 @dataclass
-class RecordedShadows:
-    """The sun, the shade and the kept shadow maps of one decomposed fit."""
+class LearntLayer:
+    """One vehicle's layer in a fit: its grid's placement and the logits being fitted."""
 
-    sun: np.ndarray  # unit direction sunlight travels
-    ratio: float  # fraction of its light the ground keeps in full shadow
-    refresh_every: int
-    maps: dict[tuple[str, int], ShadowMap | None] = field(default_factory=dict)
-    shapes: dict[str, Gaussians] = field(default_factory=dict)  # each vehicle's Gaussians as of the refresh
-    built_at: int | None = None
+    grid: ShadowLayer
+    logits: torch.nn.Parameter
+
+    def occlusion(self) -> torch.Tensor:
+        return torch.sigmoid(self.logits)
+
+    def layer(self) -> ShadowLayer:
+        """The layer as it stands."""
+        return ShadowLayer(self.occlusion().detach().numpy().astype(np.float32), self.grid.origin, self.grid.cell)
+
+
+class RecordedShadows:
+    """The sun, the shade, and the shadow layers of one decomposed fit's vehicles."""
+
+    def __init__(self, sun: np.ndarray, ratio: float, layers: dict[str, LearntLayer], lr: float):
+        self.sun, self.ratio, self.layers = sun, ratio, layers
+        self.opt = torch.optim.Adam([v.logits for v in layers.values()], lr=lr, eps=1e-15) if layers else None
 
     @staticmethod
-    def of(manifest: Manifest, refresh_every: int) -> RecordedShadows | None:
-        """The scene's shadows to lay, None where it casts none (no sun, or shadows off)."""
+    def of(manifest: Manifest, tracks: list, lr: float) -> RecordedShadows | None:
+        """Layers for the recorded vehicles ``tracks`` (:class:`.decompose.Track`), each started as
+        its box's shadow at its first pose; None where the scene casts no shadow."""
         sun, _ = manifest.effects.casting_sun()
-        return None if sun is None else RecordedShadows(sun, manifest.effects.shade, refresh_every)
+        if sun is None or not tracks:
+            return None
+        layers = {}
+        for t in tracks:
+            grid = ShadowLayer.initial(t.wlh, sun, t.poses[t.frames()[0]])
+            layers[t.actor_id] = LearntLayer(grid, torch.nn.Parameter(torch.from_numpy(logit(grid.occlusion))))
+        return RecordedShadows(sun, manifest.effects.shade, layers, lr)
 
-    def apply(self, rgb: torch.Tensor, info: dict, view, present: list, it: int) -> torch.Tensor:
-        """``rgb`` [H, W, 3] (the composed render of ``view``) with the shadows of the ``present``
+    def apply(self, rgb: torch.Tensor, info: dict, view, present: list) -> torch.Tensor:
+        """``rgb`` [H, W, 3] (the composed render of ``view``) with the layers of the ``present``
         vehicles (parts with a box) laid where the vehicles do not cover the image; in the graph of
-        ``rgb``, so the background behind a shadow is fitted in sunlight."""
-        vehicles = [p for p in present if p.half is not None]
+        ``rgb`` and of the layers."""
+        vehicles = [p for p in present if p.name in self.layers]
         if not vehicles:
             return rgb
-        if self.built_at is None or it - self.built_at >= self.refresh_every:
-            self.maps.clear()
-            self.shapes.clear()
-            self.built_at = it
-        maps = [m for m in (self._map(p, view.frame) for p in vehicles) if m is not None]
-        if not maps:
-            return rgb
         c2w = np.linalg.inv(view.viewmat.double().numpy())
+        K = view.K.double().numpy()
         depth = info["depth"].detach().reshape(view.height, view.width).double().numpy()
-        occlusion = combined_occlusion(maps, c2w, view.K.double().numpy(), view.width, view.height, depth)
-        if not (occlusion > 0).any():
-            return rgb
+        occs = []
+        for part in vehicles:
+            learnt = self.layers[part.name]
+            smap = learnt.grid.at(_pose(part, view.frame), _wlh(part.half), learnt.occlusion())
+            occs.append(occlusion_image(smap, c2w, K, view.width, view.height, depth))
+        occ = union(occs).to(rgb.dtype)
         covered = 1.0 - torch.prod(1.0 - info["instance"].detach().clamp(0.0, 1.0), dim=-1, keepdim=True)
-        occ = torch.from_numpy(occlusion).to(rgb.dtype)
         return rgb + (1.0 - covered) * (shaded(rgb, occ, self.ratio) - rgb)
 
-    def _map(self, part, frame: int) -> ShadowMap | None:
-        key = (part.name, frame)
-        if key not in self.maps:
-            if part.name not in self.shapes:
-                self.shapes[part.name] = part.gaussians()
-            self.maps[key] = vehicle_shadow_map(self.shapes[part.name], _pose(part, frame), _wlh(part.half), self.sun,
-                                                min_cell=MAP_CELL_M)
-        return self.maps[key]
+    def zero_grad(self) -> None:
+        if self.opt is not None:
+            self.opt.zero_grad(set_to_none=True)
+
+    def step(self) -> None:
+        if self.opt is not None:
+            self.opt.step()
+
+    def fitted(self) -> dict[str, ShadowLayer]:
+        """Each vehicle's layer as it stands, by actor id."""
+        return {name: learnt.layer() for name, learnt in self.layers.items()}
+
+    def save(self, folder: Path) -> None:
+        """Each layer's logits and Adam moments under ``folder/<actor id>/``."""
+        from safetensors.torch import save_file
+
+        from ..io.atomic import atomic_path
+
+        for name, learnt in self.layers.items():
+            tensors = {"logits": learnt.logits.detach()}
+            state = self.opt.state.get(learnt.logits, {})
+            for key in ("exp_avg", "exp_avg_sq", "step"):
+                if key in state:
+                    tensors[key] = state[key].reshape(-1) if key == "step" else state[key]
+            with atomic_path(Path(folder) / name / LAYER_FILE) as tmp:
+                save_file({k: v.contiguous() for k, v in tensors.items()}, str(tmp))
+
+    def load(self, folder: Path) -> None:
+        """Continue from :meth:`save`'s files (a layer without one starts afresh)."""
+        from safetensors.torch import load_file
+
+        for name, learnt in self.layers.items():
+            path = Path(folder) / name / LAYER_FILE
+            if not path.is_file():
+                continue
+            saved = load_file(str(path))
+            with torch.no_grad():
+                learnt.logits.copy_(saved["logits"])
+            if "step" in saved:
+                self.opt.state[learnt.logits] = {"step": saved["step"].reshape(()), "exp_avg": saved["exp_avg"],
+                                                 "exp_avg_sq": saved["exp_avg_sq"]}
 
 
 def _pose(part, frame: int) -> Pose:

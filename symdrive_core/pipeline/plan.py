@@ -183,17 +183,17 @@ def _has_training_images(manifest: Manifest, cam) -> bool:
 
 
 def _cast_shadow(manifest: Manifest, visible, fitted: list[str]) -> StageDecision:
-    """Vehicles cast shadows where the scene has a sun: inserted ones, and recorded ones fitted in
-    their own frames (``fitted``: by this run; or linked splats), since such a fit lays their
-    shadows apart from the background (:mod:`symdrive_core.optim.recorded_shadows`)."""
+    """Vehicles cast shadows where the scene has a sun: inserted ones, and recorded ones whose
+    decomposed fit learnt their shadow apart from the background (``fitted``: this run's fit; or
+    ``assets.shadow``, :mod:`symdrive_core.optim.recorded_shadows`)."""
     sun, why = manifest.effects.casting_sun()
     casters = {a.id for a in manifest.actors if a.wlh is not None and (
-        a.kind == "inserted" or a.splats or a.id in fitted)}  # inserted: splats or mesh, all render
+        a.kind == "inserted" or a.shadow or a.id in fitted)}  # inserted: splats or mesh, all render
     frames = sorted({fi for cam in visible.values() for fi, ids in cam.items() if casters & set(ids)})
     if sun is None:
         return StageDecision("cast_shadow", False, why)
     if not frames:
-        return StageDecision("cast_shadow", False, "no vehicle with a size and Gaussians in any frame")
+        return StageDecision("cast_shadow", False, "no vehicle that casts a shadow in any frame")
     seen = sorted({a for cam in visible.values() for fi in frames for a in cam.get(fi, []) if a in casters})
     return StageDecision("cast_shadow", True, why, frames, seen)
 

@@ -80,9 +80,12 @@ class FrameRender:
 class SceneRenderer:
     def __init__(self, manifest: Manifest, *, device: str = "cpu", background_color=(0.0, 0.0, 0.0),
                  antialiased: bool = False, background_gaussians=None, actor_gaussians: dict | None = None,
-                 asset_cache: Path | None = None):
+                 asset_cache: Path | None = None, actor_shadows: dict | None = None):
         """``asset_cache``: folder for mesh-only actors' sampled splats (for ``symdrive run``,
-        ``<out>/insertion_assets``); without it they are sampled in memory."""
+        ``<out>/insertion_assets``); without it they are sampled in memory. ``actor_shadows``:
+        recorded vehicles' shadow layers by actor id (a reconstruction this run fitted), in place
+        of the package's (``assets.shadow``)."""
+        from ..shadows.layer import ShadowLayer
         from ..splat.tensors import GaussianTensors
 
         self.manifest = manifest
@@ -94,13 +97,15 @@ class SceneRenderer:
             bg = read_splats(manifest.resolve(manifest.background_splats))
         self.background = None if bg is None else GaussianTensors.from_gaussians(bg, device=self.device)
         self.actors = {}
-        self.sources = {}  # actor id -> Gaussians as read (what its cast shadow is computed from)
+        self.sources = {}  # inserted actor id -> Gaussians as read (what its cast shadow is computed from)
+        self.shadow_layers = {a.id: ShadowLayer.load(manifest.resolve(a.shadow)) for a in manifest.actors
+                              if a.shadow} | dict(actor_shadows or {})  # recorded vehicles' own shadows
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
             if g is None and (a.splats or a.mesh):
                 g = actor_splats(manifest, a, asset_cache)
             if g is not None:
-                if not isinstance(g, GaussianTensors):
+                if a.kind == "inserted" and not isinstance(g, GaussianTensors):
                     self.sources[a.id] = g
                 self.actors[a.id] = g if isinstance(g, GaussianTensors) else GaussianTensors.from_gaussians(
                     g, device=self.device)
@@ -142,14 +147,19 @@ class SceneRenderer:
     def cast_shadows(self, camera: str, frame: int, render: FrameRender, actor_ids: list[str], sun_direction,
                      ratio: float) -> FrameRender:
         """``render`` with the sun shadows of ``actor_ids`` laid on its background
-        (:mod:`symdrive_core.insertion.cast_shadow`); vehicles stay as rendered."""
-        from ..insertion.cast_shadow import lay_shadows, vehicle_shadow_map
+        (:mod:`symdrive_core.shadows.cast`): an inserted vehicle's cast by its Gaussians, a
+        recorded one's its learnt layer; vehicles stay as rendered."""
+        from ..shadows.cast import lay_shadows, vehicle_shadow_map
 
         maps = []
         for aid in actor_ids:
             actor = self.manifest.actor(aid)
             pose = actor.pose(frame)
-            if aid in self.sources and pose is not None and actor.wlh is not None:
+            if pose is None or actor.wlh is None:
+                continue
+            if aid in self.shadow_layers:
+                maps.append(self.shadow_layers[aid].at(pose, actor.wlh))
+            elif aid in self.sources:
                 maps.append(vehicle_shadow_map(self.sources[aid], pose, actor.wlh, sun_direction))
         maps = [m for m in maps if m is not None]
         if not maps:
@@ -162,11 +172,12 @@ class SceneRenderer:
 
 
 def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: list[tuple[str, int]], device: str,
-                  progress: bool = True, background=None, actors: dict | None = None) -> int:
+                  progress: bool = True, background=None, actors: dict | None = None,
+                  shadows: dict | None = None) -> int:
     """Render (camera, frame) jobs whose outputs are missing into the output tree (RGB written last:
     its presence marks the frame complete); returns how many were rendered. ``background``:
     Gaussians to use instead of the manifest's (a reconstruction this run fitted), ``actors`` its
-    recorded vehicles' by actor id."""
+    recorded vehicles' by actor id, ``shadows`` their shadow layers."""
     out = out if isinstance(out, OutputTree) else OutputTree(out)
     renderer = None
     done = 0
@@ -177,7 +188,8 @@ def render_frames(manifest: Manifest, plan: Plan, out: Path | OutputTree, jobs: 
             continue
         if renderer is None:
             renderer = SceneRenderer(manifest, device=device, asset_cache=out.folder(ASSET_CACHE),
-                                     background_gaussians=background, actor_gaussians=actors)
+                                     background_gaussians=background, actor_gaussians=actors,
+                                     actor_shadows=shadows)
         frame = renderer.render(cam, fi, plan.visible[cam][fi])
         if casting.run and fi in casting.frames:
             casters = [a for a in plan.visible[cam][fi] if a in casting.actors]

@@ -82,6 +82,7 @@ class Shared:
     background: object = None  # Gaussians
     background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
     actors: dict = field(default_factory=dict)  # its recorded vehicles' Gaussians, by actor id
+    shadows: dict | None = None  # their shadow layers, by actor id
     restorer: object = None
     drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
     adapted: Path | None = None  # the folder of this drive's adapted restorer
@@ -115,6 +116,17 @@ def recorded_vehicles(ctx) -> dict:
         ctx.shared.actors = {a.id: read_splats(ctx.manifest.resolve(a.splats)) for a in ctx.manifest.actors
                              if a.kind == "existing" and a.splats}
     return ctx.shared.actors
+
+
+def recorded_shadows(ctx) -> dict:
+    """The recorded vehicles' shadow layers by actor id: this run's reconstruction's, else the
+    package's (``assets.shadow``)."""
+    from ..shadows.layer import ShadowLayer
+
+    if ctx.shared.shadows is None:
+        ctx.shared.shadows = {a.id: ShadowLayer.load(ctx.manifest.resolve(a.shadow)) for a in ctx.manifest.actors
+                              if a.shadow}
+    return ctx.shared.shadows
 
 
 def restorer(ctx):
@@ -196,6 +208,7 @@ def reconstruct_stage(ctx) -> StageResult:
     with_refined(ctx.manifest, result.poses)
     ctx.shared.background_path = out / "background.ply"
     ctx.shared.actors = result.actors
+    ctx.shared.shadows = result.shadows
     return StageResult({"gaussians": len(result.gaussians), "actors": {k: len(g) for k, g in result.actors.items()},
                         "depth_weight": result.metrics["depth_weight"]})
 
@@ -208,7 +221,7 @@ def render_stage(ctx) -> StageResult:
     jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("render").frames]
     fitted = background(ctx) if ctx.shared.background_path is not None else None
     done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted,
-                         actors=ctx.shared.actors)
+                         actors=ctx.shared.actors, shadows=recorded_shadows(ctx))
     return StageResult({"frames_rendered": done, "frames_reused": len(jobs) - done})
 
 
@@ -226,7 +239,8 @@ def inpaint_stage(ctx) -> StageResult:
 
     cfg = ctx.options.inpaint
     renderer = SceneRenderer(ctx.manifest, device=ctx.device, asset_cache=ctx.tree.folder(ASSET_CACHE),
-                             background_gaussians=background(ctx), actor_gaussians=recorded_vehicles(ctx))
+                             background_gaussians=background(ctx), actor_gaussians=recorded_vehicles(ctx),
+                             actor_shadows=recorded_shadows(ctx))
     inpaint = _harmonizer(ctx, cfg.harmonize)
     jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("inpaint").frames]
     pixels, n = 0, 0
@@ -363,8 +377,8 @@ def refine_stage(ctx) -> StageResult:
 
 def _inserted_region(ctx, cam, fi) -> np.ndarray | None:
     """Vehicle pixels (from the render's instance masks) ∪ each vehicle's shadow region."""
-    from ..insertion.shadow import harmonization_region, shadow_region
     from ..io.images import read_mask
+    from ..shadows.region import harmonization_region, shadow_region
 
     m = ctx.manifest
     region = None
@@ -462,7 +476,8 @@ def evaluate_stage(ctx) -> StageResult:
     m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
     has_background = background_path(ctx) is not None
     if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
-        metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx))
+        metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx),
+                                                     shadows=recorded_shadows(ctx))
     if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))

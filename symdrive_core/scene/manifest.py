@@ -84,6 +84,9 @@ class Actor:
     # The tracks' boxes, when a reconstruction refined them (its refined poses are then the
     # recorded poses): what a later refinement starts from again. None: not refined.
     tracked_poses: list[Pose | None] | None = None
+    # A recorded vehicle's shadow layer (:mod:`symdrive_core.shadows.layer`), as its
+    # decomposed fit learnt it: laid where the scene has a sun. None: its shadow is not its own.
+    shadow: str | None = None
 
     def pose(self, frame: int) -> Pose | None:
         return self.poses[frame]
@@ -191,7 +194,8 @@ class Manifest:
                 refs += [(f"cameras[{ci}].frames[{fi}].image", cf.image),
                          (f"cameras[{ci}].frames[{fi}].depth", cf.depth)]
         for ai, a in enumerate(self.actors):
-            refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh)]
+            refs += [(f"actors[{ai}].assets.splats", a.splats), (f"actors[{ai}].assets.mesh", a.mesh),
+                     (f"actors[{ai}].assets.shadow", a.shadow)]
         for mi, e in enumerate(self.masks):
             refs += [(f"masks.entries[{mi}].amodal", e.amodal), (f"masks.entries[{mi}].visible", e.visible)]
         for mi, e in enumerate(self.id_maps):
@@ -264,7 +268,7 @@ class Manifest:
             "background": {"splats": self.background_splats, "points": self.background_points},
             "actors": [{
                 "id": a.id, "kind": a.kind, "instance_id": a.instance_id,
-                "assets": {"splats": a.splats, "mesh": a.mesh},
+                "assets": {"splats": a.splats, "mesh": a.mesh, **({} if a.shadow is None else {"shadow": a.shadow})},
                 **({"wlh": [float(v) for v in a.wlh]} if a.wlh is not None else {}),
                 "poses": [None if p is None else p.to_json() for p in a.poses],
                 **({} if a.recorded_poses is None else {
@@ -450,6 +454,9 @@ def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
         assets = rd.obj(rd.key(a, "assets", w), f"{w}.assets")
         splats = rd.ref(assets.get("splats"), f"{w}.assets.splats")
         mesh = rd.ref(assets.get("mesh"), f"{w}.assets.mesh")
+        shadow = rd.ref(assets.get("shadow"), f"{w}.assets.shadow")
+        if shadow is not None and kind != "existing":
+            rd.fail(f"{w}.assets.shadow", "only an existing actor has a learnt shadow layer")
         wlh = None
         if a.get("wlh") is not None:
             wlh = rd.vector(a["wlh"], 3, f"{w}.wlh")
@@ -474,7 +481,7 @@ def _actors(rd: _Reader, d: dict, nf: int) -> list[Actor]:
         iid = rd.integer(a.get("instance_id", ai + 1), f"{w}.instance_id", 1, ID_MAX)
         if any(x.instance_id == iid for x in actors):
             rd.fail(f"{w}.instance_id", f"duplicate instance id {iid}")
-        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid, recorded, tracked))
+        actors.append(Actor(aid, kind, splats, mesh, poses, wlh, iid, recorded, tracked, shadow))
     return actors
 
 
@@ -639,6 +646,18 @@ _MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply")
 _OBJ_KEYWORDS = {b"v", b"vn", b"vt", b"vp", b"f", b"l", b"p", b"o", b"g", b"s", b"mtllib", b"usemtl"}
 
 
+def _check_shadow(path: Path) -> None:
+    """A shadow layer reads as one (a small file: read whole)."""
+    from ..io import check_regular
+    from ..io.shadow_grid import read_shadow_grid
+
+    check_regular(path)
+    try:
+        read_shadow_grid(path)
+    except ValueError as exc:
+        raise InputError(path, str(exc), "shadow") from None
+
+
 def _check_mesh(path: Path) -> None:
     """A mesh is non-empty and recognisable as OBJ, glTF (binary or JSON) or PLY; only its
     first bytes are read."""
@@ -703,6 +722,7 @@ def check_files(m: Manifest, *, headers: bool = True) -> None:
     for ai in range(len(m.actors)):
         kinds[f"actors[{ai}].assets.splats"] = ("splats", None)
         kinds[f"actors[{ai}].assets.mesh"] = ("mesh", None)
+        kinds[f"actors[{ai}].assets.shadow"] = ("shadow", None)
     for mi, e in enumerate(m.masks):
         for key in ("amodal", "visible"):
             kinds[f"masks.entries[{mi}].{key}"] = ("image", sizes.get(e.camera))
@@ -723,6 +743,8 @@ def check_files(m: Manifest, *, headers: bool = True) -> None:
                 check_ply(full, kind)
             elif kind == "mesh":
                 _check_mesh(full)
+            elif kind == "shadow":
+                _check_shadow(full)
             elif kind == "image":
                 _check_image(full, size)
         except InputError as exc:

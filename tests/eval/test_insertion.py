@@ -72,8 +72,8 @@ def test_an_insertion_casts_a_shadow_exactly_where_the_plan_says(tmp_path):
 
     from symdrive_core.insertion.assets import load_vehicle_asset
     from symdrive_core.insertion.insert import insert_frame
-    from symdrive_core.insertion.shadow import harmonization_region
     from symdrive_core.pipeline.plan import make_plan
+    from symdrive_core.shadows.region import harmonization_region
     from symdrive_core.splat.tensors import GaussianTensors
 
     path, bg = package.write_package(tmp_path / "pkg", sun=package.SUN)
@@ -89,4 +89,4 @@ def test_an_insertion_casts_a_shadow_exactly_where_the_plan_says(tmp_path):
         if not casts:  # harmonization may change the car alone
             assert np.array_equal(frame.region, harmonization_region(frame.vehicle_alpha, None))
         reason = make_plan(scene).stage("cast_shadow").reason
-        assert reason == scene.effects.casting_sun()[1] or (casts and "no vehicle with a size" in reason)
+        assert reason == scene.effects.casting_sun()[1] or (casts and "no vehicle that casts a shadow" in reason)

@@ -205,6 +205,7 @@ LAYERS = (
     "io",  # files in and out
     "scene",  # the package: manifest, cameras, poses, road, ground truth
     "splat",  # the renderer
+    "shadows",  # vehicles' sun shadows on the ground: cast, learnt, the region they may cover
     "optim",  # fitting: reconstruction, fine-tuning
     "importers",  # recorded drives in
     "diffusion",  # the restorer and its chain

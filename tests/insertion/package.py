@@ -44,7 +44,7 @@ def relight_region(image: np.ndarray, region: np.ndarray) -> np.ndarray:
 
 def box_shadow(view, pose, wlh, sun) -> np.ndarray:
     """Bool [H, W]: the pixel's ground point (z = 0) cannot see the sun past the box."""
-    from symdrive_core.insertion.shadow import ground_hits
+    from symdrive_core.shadows.region import ground_hits
 
     cam = view.camera
     xy, hit = ground_hits(cam.camera_to_world, cam.K, cam.width, cam.height, 0.0)

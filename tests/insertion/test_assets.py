@@ -7,11 +7,11 @@ from symdrive_core.conventions import linear_to_srgb
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.insertion.assets import flip_forward, load_vehicle_asset
 from symdrive_core.insertion.mesh_to_splats import mesh_to_splats, sample_colors
-from symdrive_core.insertion.place import ground_height, grounded, place
 from symdrive_core.io.mesh import TriMesh, read_obj
 from symdrive_core.io.ply import write_splats
 from symdrive_core.rotations import quat_from_yaw, quat_to_matrix
 from symdrive_core.scene import Pose
+from symdrive_core.scene.place import ground_height, grounded, place
 from symdrive_core.splat.sh import eval_sh
 from symdrive_core.world.obj import write_obj
 

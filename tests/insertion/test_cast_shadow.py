@@ -6,7 +6,7 @@ import pytest
 
 from symdrive_core.conventions import srgb_to_linear
 from symdrive_core.gaussians import Gaussians, logit
-from symdrive_core.insertion.cast_shadow import darken, occlusion_image, shadow_map
+from symdrive_core.shadows.cast import darken, occlusion_image, shadow_map
 
 from . import synthetic
 
@@ -140,7 +140,7 @@ def test_no_shadow_on_what_stands_in_front_of_the_ground():
     args = (cam.camera_to_world, cam.K, cam.width, cam.height)
     bare = occlusion_image(smap, *args)
     # the ground's own depth (what a render of the bare ground gives), then a wall in the left half
-    from symdrive_core.insertion.shadow import ground_hits
+    from symdrive_core.shadows.region import ground_hits
 
     xy, hit = ground_hits(*args, 0.0)
     pts = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], -1)
@@ -154,8 +154,8 @@ def test_no_shadow_on_what_stands_in_front_of_the_ground():
 
 
 def test_a_huge_floater_does_not_wash_out_the_cars_shadow():
-    from symdrive_core.insertion.cast_shadow import shadow_window
-    from symdrive_core.insertion.place import place
+    from symdrive_core.scene.place import place
+    from symdrive_core.shadows.cast import shadow_window
 
     pose, sun = synthetic.car_pose(), _sun(40.0, 60.0)
     car = place(synthetic.car(800), pose)

@@ -2,7 +2,7 @@ import numpy as np
 import torch
 
 from symdrive_core.insertion.insert import insertion_view
-from symdrive_core.insertion.place import place
+from symdrive_core.scene.place import place
 from symdrive_core.splat import rasterize
 from symdrive_core.splat.tensors import GaussianTensors
 

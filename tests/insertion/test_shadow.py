@@ -1,7 +1,8 @@
 import numpy as np
 
 from symdrive_core import conventions
-from symdrive_core.insertion.shadow import (
+from symdrive_core.scene import Pose
+from symdrive_core.shadows.region import (
     convex_hull,
     dilate,
     harmonization_region,
@@ -9,7 +10,6 @@ from symdrive_core.insertion.shadow import (
     shadow_polygon,
     shadow_region,
 )
-from symdrive_core.scene import Pose
 
 from . import synthetic
 

@@ -9,13 +9,13 @@ import torch
 
 from symdrive_core import conventions
 from symdrive_core.gaussians import Gaussians
-from symdrive_core.insertion.cast_shadow import lay_shadows, vehicle_shadow_map
 from symdrive_core.io.images import write_image
 from symdrive_core.io.points import write_points
 from symdrive_core.rotations import quat_from_yaw
 from symdrive_core.scene import Actor, Camera, CameraFrame, Frame, Manifest, Pose
 from symdrive_core.scene.camera import CameraView
 from symdrive_core.scene.manifest import DEFAULT_SHADOW_RATIO, Effects
+from symdrive_core.shadows.cast import lay_shadows, vehicle_shadow_map
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
 from tests.conftest import look_at_c2w

@@ -4,9 +4,9 @@ import numpy as np
 
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.insertion.insert import insertion_view
-from symdrive_core.insertion.shadow import dilate
 from symdrive_core.metrics import psnr
 from symdrive_core.optim.finetune import FinetuneConfig, FinetuneSample, finetune_colors
+from symdrive_core.shadows.region import dilate
 from symdrive_core.splat.tensors import GaussianTensors
 
 from ..insertion import synthetic

@@ -85,3 +85,18 @@ def test_the_second_camera_is_seen_better_by_the_fit_that_trained_on_it(rig):
     right_both = evaluate_heldout(m, both.gaussians, heldout, "right", actors=both.actors)["psnr_heldout"]
     right_one = evaluate_heldout(m, one.gaussians, heldout, "right", actors=one.actors)["psnr_heldout"]
     assert right_both > right_one + 1.0
+
+
+def test_the_default_run_renders_and_restores_every_camera(rig, tmp_path):
+    from symdrive_core.cli import main
+
+    m, both, _ = rig
+    m.background_splats = (both.output / "background.ply").relative_to(m.root).as_posix()
+    m.actor("car_1").splats = (both.output / "actors" / "car_1.ply").relative_to(m.root).as_posix()
+    m.effects.lateral_offsets = [1.0]
+    m.save()
+    out = tmp_path / "out"
+    assert main(["run", str(m.root), "--out", str(out), "--quiet", "--frames", "2,6"]) == 0
+    for cam in ("front", "right"):
+        assert sorted(p.name for p in (out / "render" / cam).glob("*.png")) == ["000002.png", "000006.png"]
+        assert sorted(p.name for p in (out / "restore" / cam / "+1").glob("*.png")) == ["000002.png", "000006.png"]

@@ -3,6 +3,7 @@ none, and a drive whose box casts a shadow: the fit learns the street lit, and r
 takes its shadow along."""
 
 import dataclasses
+import json
 import shutil
 
 import numpy as np
@@ -10,11 +11,12 @@ import pytest
 import torch
 
 from symdrive_core.eval.edits import evaluate_decomposition, evaluate_edits
-from symdrive_core.insertion.cast_shadow import shaded
 from symdrive_core.io.images import write_image, write_mask
+from symdrive_core.optim.decompose import tracks
 from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
 from symdrive_core.optim.recorded_shadows import RecordedShadows
 from symdrive_core.scene import Effects, load_manifest
+from symdrive_core.shadows.cast import shaded
 from tests.optim.moving_box import write_moving_box
 
 # Light travelling down and towards the recording camera: the box's shadow falls on the floor
@@ -43,7 +45,7 @@ def test_shading_is_identity_where_nothing_occludes_and_scales_linear_light_wher
 def test_a_scene_without_a_casting_sun_lays_no_shadow(tmp_path, effects):
     root, *_ = write_moving_box(tmp_path / "pkg")
     m = dataclasses.replace(load_manifest(root), effects=effects)
-    assert RecordedShadows.of(m, 100) is None
+    assert RecordedShadows.of(m, tracks(m), 0.05) is None
 
 
 @pytest.fixture(scope="module")
@@ -85,11 +87,12 @@ def test_the_truth_has_a_shadow_outside_the_box(shadowed):
 
 def test_removing_a_box_fitted_with_its_shadow_takes_the_shadow_along(shadowed):
     m, laid, plain, baked, truth = shadowed
-    with_shadow = evaluate_edits(m, laid.gaussians, laid.actors)["remove"]
+    assert set(laid.shadows) == {"car_1"} and baked.shadows == {}
+    with_shadow = evaluate_edits(m, laid.gaussians, laid.actors, shadows=laid.shadows)["remove"]
     left_behind = evaluate_edits(plain, baked.gaussians, baked.actors)["remove"]
     assert with_shadow["psnr_car_and_shadow_dropped"] > left_behind["psnr_car_and_shadow_dropped"] + 2.0
     # and the recorded drive, shadow included, is rendered no worse than the fit that baked it in
-    ours, theirs = evaluate_decomposition(m, laid.gaussians, laid.actors), evaluate_decomposition(
+    ours, theirs = evaluate_decomposition(m, laid.gaussians, laid.actors, shadows=laid.shadows), evaluate_decomposition(
         plain, baked.gaussians, baked.actors)
     assert ours["psnr_image"] > theirs["psnr_image"] - 0.5
 
@@ -118,9 +121,79 @@ def test_the_run_casts_the_shadows_of_recorded_vehicles_fitted_in_their_own_fram
     stage = make_plan(m).stage("cast_shadow")
     assert stage.run and stage.actors == ["car_1"]  # the run's own fit decomposes the box
     assert not make_plan(plain).stage("cast_shadow").run
-    renderer = SceneRenderer(m, background_gaussians=laid.gaussians, actor_gaussians=laid.actors)
+    renderer = SceneRenderer(m, background_gaussians=laid.gaussians, actor_gaussians=laid.actors,
+                             actor_shadows=laid.shadows)
     for f in (2, 6):
         frame = renderer.render("front", f)
         cast = renderer.cast_shadows("front", f, frame, ["car_1"], m.effects.casting_sun()[0], m.effects.shade)
         assert cast.shadow is not None and (cast.shadow > 0.5).sum() > 20
         assert psnr(cast.rgb, truth[f]["rgb"]) > psnr(frame.rgb, truth[f]["rgb"]) + 2.0
+
+
+def test_a_layer_starts_as_its_boxs_shadow_and_moves_with_the_vehicle():
+    from symdrive_core.rotations import quat_from_yaw
+    from symdrive_core.scene import Pose
+    from symdrive_core.shadows.layer import ShadowLayer
+    from symdrive_core.shadows.region import inside_convex, shadow_polygon
+
+    wlh = np.array([1.8, 4.5, 1.5])
+    start = Pose(np.array([3.0, -2.0, 0.75]), quat_from_yaw(0.4))
+    layer = ShadowLayer.initial(wlh, SUN, start)
+    # at its start pose the layer is the box's shadow hull in the world (to the grid's resolution)
+    hull = shadow_polygon(start, wlh, SUN)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(hull.min(0) - 1.0, hull.max(0) + 1.0, (4000, 2))
+    inside = inside_convex(pts, hull)
+    occ = layer.at(start, wlh).sample(pts)
+    far_in = inside_convex(pts, _shrunk(hull, 0.15))
+    assert np.allclose(occ[far_in], 0.5, atol=1e-6) and (occ[~inside] <= 0.5 + 1e-6).all()
+    # moved and turned, the grid goes along: a point fixed in the vehicle's frame reads the same
+    moved = Pose(np.array([-7.0, 5.0, 1.75]), quat_from_yaw(-1.1))
+    local = np.column_stack([rng.uniform(-3, 3, 50), rng.uniform(-2, 2, 50), np.full(50, -0.75)])
+    assert np.allclose(layer.at(start, wlh).sample(start.apply(local)[:, :2]),
+                       layer.at(moved, wlh).sample(moved.apply(local)[:, :2]), atol=1e-9)
+    assert layer.at(moved, wlh).ground_z == pytest.approx(1.0)
+
+
+def _shrunk(hull: np.ndarray, margin: float) -> np.ndarray:
+    """A convex polygon moved ``margin`` metres towards its centroid (inside it, for a test's
+    points clear of the grid's cells on the edge)."""
+    c = hull.mean(0)
+    d = hull - c
+    return c + d * (1.0 - margin / np.linalg.norm(d, axis=1, keepdims=True))
+
+
+def test_a_layer_round_trips_and_a_bad_file_is_named(tmp_path):
+    from symdrive_core.scene import Pose
+    from symdrive_core.shadows.layer import ShadowLayer
+
+    layer = ShadowLayer.initial(np.array([1.8, 4.5, 1.5]), SUN, Pose(np.zeros(3), np.array([1.0, 0, 0, 0])))
+    layer.save(tmp_path / "a.shadow.safetensors")
+    back = ShadowLayer.load(tmp_path / "a.shadow.safetensors")
+    assert np.array_equal(back.occlusion, layer.occlusion) and np.allclose(back.origin, layer.origin)
+    assert back.cell == layer.cell
+    (tmp_path / "bad.safetensors").write_bytes(b"not a layer")
+    with pytest.raises(ValueError, match="not a shadow layer file"):
+        ShadowLayer.load(tmp_path / "bad.safetensors")
+
+
+def test_a_package_names_a_vehicles_shadow_layer_and_checks_it(shadowed, tmp_path):
+    from symdrive_core.scene import ManifestError, check_files
+
+    m, laid, *_ = shadowed
+    root = tmp_path / "pkg"
+    shutil.copytree(m.root, root)
+    pkg = load_manifest(root)
+    pkg.actor("car_1").shadow = (laid.output / "actors" / "car_1.shadow.safetensors").relative_to(m.root).as_posix()
+    pkg.save()
+    back = load_manifest(root)
+    assert back.actor("car_1").shadow == pkg.actor("car_1").shadow
+    check_files(back)
+    (root / back.actor("car_1").shadow).write_bytes(b"garbage")
+    with pytest.raises(ManifestError, match=r"actors\[0\]\.assets\.shadow"):
+        check_files(load_manifest(root))
+    data = json.loads((root / "manifest.json").read_text())
+    data["actors"][0]["kind"] = "inserted"
+    (root / "manifest.json").write_text(json.dumps(data))
+    with pytest.raises(ManifestError, match="only an existing actor has a learnt shadow layer"):
+        load_manifest(root)

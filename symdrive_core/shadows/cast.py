@@ -24,12 +24,12 @@ from .. import conventions
 from ..conventions import sun_above_horizon
 from ..gaussians import Gaussians
 from ..scene import Pose
+from ..scene.place import place
 from ..splat.constants import ALPHA_MAX, ALPHA_THRESHOLD
 from ..splat.frozen_view import FrozenView
 from ..splat.projection import quat_to_rotmat
 from ..splat.rasterizer import RasterizePixels, bin_gaussians
-from .place import place
-from .shadow import ground_hits, shadow_polygon, vehicle_ground_z
+from .region import ground_hits, shadow_polygon, vehicle_ground_z
 
 MAP_MAX_PIXELS = 1024  # longest side of the shadow map
 MAP_MIN_CELL_M = 0.01
@@ -43,26 +43,30 @@ EXTENT_SIGMAS = 3.5  # o * exp(-3.5^2 / 2) < 1/255 for any opacity: the cut drop
 
 @dataclass(frozen=True)
 class ShadowMap:
-    occlusion: np.ndarray  # [rows, cols] in [0, 1]; row = y, col = x on the ground
-    origin: np.ndarray  # world (x, y) of the map's corner (pixel edge, not centre)
+    """Occlusion of the sun on a ground plane, as a grid in the world's (x, y) or, with
+    ``to_map``, in another frame on that plane (a vehicle's own, for a shadow that moves with it)."""
+
+    occlusion: np.ndarray | torch.Tensor  # [rows, cols] in [0, 1]; row = y, col = x of the map's frame
+    origin: np.ndarray  # (x, y) of the map's corner in its frame (pixel edge, not centre)
     cell: float  # metres per map pixel
     ground_z: float
+    to_map: np.ndarray | None = None  # [2, 3]: world (x, y, 1) on the ground -> the map's (x, y); None: the world's
 
-    def sample(self, xy: np.ndarray) -> np.ndarray:
-        """Bilinear occlusion at world ground points [..., 2]; 0 outside the map."""
+    def sample(self, xy: np.ndarray):
+        """Bilinear occlusion at world ground points [..., 2]; 0 outside the map, fading to it over
+        the border cell. A tensor occlusion gives a tensor, in its graph (a learnt map fits through
+        it), else float64 numpy."""
+        p = np.asarray(xy, dtype=np.float64)
+        if self.to_map is not None:
+            p = p @ self.to_map[:, :2].T + self.to_map[:, 2]
         rows, cols = self.occlusion.shape
-        f = (np.asarray(xy, dtype=np.float64) - self.origin) / self.cell - conventions.PIXEL_CENTER_OFFSET
-        x0, y0 = np.floor(f[..., 0]), np.floor(f[..., 1])
-        ax, ay = f[..., 0] - x0, f[..., 1] - y0
-        padded = np.pad(self.occlusion.astype(np.float64), 1)
-
-        def at(yy, xx):
-            inside = (yy >= -1) & (yy <= rows) & (xx >= -1) & (xx <= cols)
-            v = padded[np.clip(yy + 1, 0, rows + 1).astype(np.int64), np.clip(xx + 1, 0, cols + 1).astype(np.int64)]
-            return np.where(inside, v, 0.0)
-
-        return ((1 - ay) * ((1 - ax) * at(y0, x0) + ax * at(y0, x0 + 1))
-                + ay * ((1 - ax) * at(y0 + 1, x0) + ax * at(y0 + 1, x0 + 1)))
+        unit = 2.0 * (p - self.origin) / (self.cell * np.array([cols, rows])) - 1.0  # grid_sample's [-1, 1] edges
+        occ = self.occlusion if torch.is_tensor(self.occlusion) else torch.from_numpy(
+            np.asarray(self.occlusion, dtype=np.float64))
+        grid = torch.from_numpy(unit.reshape(1, -1, 1, 2)).to(occ.dtype)
+        out = torch.nn.functional.grid_sample(occ[None, None], grid, mode="bilinear", padding_mode="zeros",
+                                              align_corners=False).reshape(p.shape[:-1])
+        return out if torch.is_tensor(self.occlusion) else out.numpy()
 
 
 def shadow_map(world_vehicle: Gaussians, sun_direction, ground_z: float, *, bounds=None,
@@ -120,12 +124,13 @@ def shadow_window(pose: Pose, wlh, sun_direction, margin: float = SHADOW_WINDOW_
 
 
 def occlusion_image(smap: ShadowMap, c2w: np.ndarray, K: np.ndarray, width: int, height: int,
-                    surface_depth: np.ndarray | None = None) -> np.ndarray:
+                    surface_depth: np.ndarray | None = None):
     """Occlusion [H, W] at the ground point of every pixel centre: 0 where the ray misses the
     ground, or where ``surface_depth`` (camera z of what the pixel shows, 0 for nothing) puts
-    the surface more than :data:`GROUND_HEIGHT_TOLERANCE` above the ground."""
+    the surface more than :data:`GROUND_HEIGHT_TOLERANCE` above the ground. float32 numpy, or a
+    tensor in the graph of a tensor map."""
     xy, hit = ground_hits(c2w, K, width, height, smap.ground_z)
-    occ = np.where(hit, smap.sample(xy), 0.0)
+    shows_ground = hit
     if surface_depth is not None:
         c2w = np.asarray(c2w, dtype=np.float64)
         points = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), smap.ground_z)], -1).reshape(-1, 3)
@@ -134,8 +139,11 @@ def occlusion_image(smap: ShadowMap, c2w: np.ndarray, K: np.ndarray, width: int,
         # along one ray height is linear in camera z: the camera's height, scaled down to the ground's
         fraction = np.divide(depth, ground_depth, out=np.ones_like(depth), where=hit & (ground_depth > 0))
         above = (c2w[2, 3] - smap.ground_z) * (1.0 - fraction)
-        occ = np.where((depth <= 0) | (above <= GROUND_HEIGHT_TOLERANCE), occ, 0.0)
-    return occ.astype(np.float32)
+        shows_ground = hit & ((depth <= 0) | (above <= GROUND_HEIGHT_TOLERANCE))
+    occ = smap.sample(xy)
+    if torch.is_tensor(occ):
+        return occ * torch.from_numpy(shows_ground).to(occ.dtype)
+    return np.where(shows_ground, occ, 0.0).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -150,11 +158,12 @@ class CastShadow:
         return darken(image, self.background, vehicle_alpha, self.occlusion, self.ratio)
 
 
-def union(layers) -> np.ndarray:
-    """``1 - prod(1 - a)`` over same-shaped coverages in [0, 1] (float64): light passes each in turn."""
+def union(layers):
+    """``1 - prod(1 - a)`` over same-shaped coverages in [0, 1] (float64 numpy, or tensors in their
+    graph): light passes each in turn."""
     through = None
     for a in layers:
-        passed = 1.0 - np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0)
+        passed = 1.0 - (a.clamp(0.0, 1.0) if torch.is_tensor(a) else np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0))
         through = passed if through is None else through * passed
     if through is None:
         raise ValueError("union: no layers")

@@ -12,7 +12,7 @@ import numpy as np
 from .. import conventions
 from ..gaussians import Gaussians
 from ..rotations import quat_multiply
-from ..scene import Pose
+from .poses import Pose
 
 
 def place(g: Gaussians, pose: Pose) -> Gaussians:
