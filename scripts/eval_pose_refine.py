@@ -50,13 +50,13 @@ def _jitter(args) -> int:
 
 
 def _fit(folder: Path, package):
-    """(background, actors, the package placing the vehicles where this fit placed them)."""
-    from symdrive_core.io.ply import read_splats
+    """(background, actors, their shadow layers, the package placing the vehicles where this fit
+    placed them)."""
     from symdrive_core.optim.pose_refine import read_refined, with_refined
+    from symdrive_core.optim.reconstruct import read_reconstruction
     from symdrive_core.scene import load_manifest
 
-    actors = {p.stem: read_splats(p) for p in sorted((folder / "actors").glob("*.ply"))}
-    return read_splats(folder / "background.ply"), actors, with_refined(load_manifest(package), read_refined(folder))
+    return *read_reconstruction(folder), with_refined(load_manifest(package), read_refined(folder))
 
 
 def _score(args) -> int:
@@ -71,8 +71,8 @@ def _score(args) -> int:
     results = {}
     for name, folder, package in (("exact", args.exact, args.truth), ("jittered", args.jittered, args.package),
                                   ("refined", args.refined, args.package)):
-        background, actors, m = _fit(folder, package)
-        row = {"heldout": evaluate_decomposition(m, background, actors), "poses": {}}
+        background, actors, shadows, m = _fit(folder, package)
+        row = {"heldout": evaluate_decomposition(m, background, actors, shadows=shadows), "poses": {}}
         for which, frames in (("train", train), ("heldout", heldout)):
             errors = [pose_errors([a.recorded_pose(f) for f in range(len(a.poses))],
                                   [truth.actor(a.id).recorded_pose(f) for f in range(len(a.poses))], frames)

@@ -20,13 +20,6 @@ import time
 from pathlib import Path
 
 
-def _reconstruction(folder: Path):
-    from symdrive_core.io.ply import read_splats
-
-    actors = {p.stem: read_splats(p) for p in sorted((folder / "actors").glob("*.ply"))}
-    return read_splats(folder / "background.ply"), actors
-
-
 def _figure(m, static, decomposed, inpaint, which: int, path: Path) -> None:
     import numpy as np
 
@@ -67,12 +60,14 @@ def main(argv=None) -> int:
 
     from symdrive_core.eval.edits import evaluate_decomposition, evaluate_edits
     from symdrive_core.io.atomic import write_text_atomic
+    from symdrive_core.optim.reconstruct import read_reconstruction
     from symdrive_core.scene import load_manifest
 
     m = load_manifest(args.package)
-    static, decomposed = _reconstruction(args.static), _reconstruction(args.decomposed)
+    static, decomposed = read_reconstruction(args.static), read_reconstruction(args.decomposed)
+    background, actors, shadows = decomposed
     results = {"heldout": {"static": evaluate_decomposition(m, static[0], {}),
-                           "decomposed": evaluate_decomposition(m, *decomposed)}}
+                           "decomposed": evaluate_decomposition(m, background, actors, shadows=shadows)}}
     inpaint = None
     if not args.no_inpaint:
         from symdrive_core.diffusion.models import load_restorer
@@ -81,7 +76,7 @@ def main(argv=None) -> int:
 
         inpaint = restorer_harmonizer(load_restorer(), InpaintConfig().harmonize)
     t0 = time.perf_counter()
-    results["edits"] = evaluate_edits(m, *decomposed, inpaint=inpaint)
+    results["edits"] = evaluate_edits(m, background, actors, inpaint=inpaint, shadows=shadows)
     results["edits_seconds"] = round(time.perf_counter() - t0, 1)
     write_text_atomic(args.out, json.dumps(results, indent=1) + "\n")
     if args.figure:

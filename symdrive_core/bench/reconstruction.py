@@ -52,7 +52,7 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
 
     def score(name: str, fit: Fit) -> None:
         g, actors = fit.gaussians()
-        q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors)
+        q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors, shadows=fit.layers())
         rows.append({"schedule": name, "iteration": fit.iteration, "seconds": round(seconds[name], 3),
                      "psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"],
                      "gaussians": sum(len(p.params["means"]) for p in fit.parts)})
@@ -160,7 +160,7 @@ def reconstruction_settings(manifest, iters: int) -> list:
                 fit = Fit.start(manifest, cfg)
                 seconds = fit.train(progress=False)["seconds"]
                 g, actors = fit.gaussians()
-                q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors)
+                q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors, shadows=fit.layers())
                 done[key] = {"psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"], "seconds": seconds, "per": "run"}
             return dict(done[key])
         return run

@@ -476,9 +476,23 @@ class Fit:
         """(background, recorded vehicles by actor id, each in its own frame) as they stand."""
         return self.parts[0].gaussians(), {p.name: p.gaussians() for p in self.parts[1:]}
 
+    def layers(self) -> dict[str, ShadowLayer]:
+        """The recorded vehicles' shadow layers as they stand, by actor id (none without a sun)."""
+        return self.shadows.fitted() if self.shadows is not None else {}
+
     def poses(self) -> dict[str, list]:
         """The tracked vehicles' refined poses as they stand, by actor id (per frame, None: no box)."""
         return {p.name: p.refine.refined() for p in self.parts if p.refine is not None}
+
+
+def read_reconstruction(folder: Path) -> tuple[Gaussians, dict[str, Gaussians], dict[str, ShadowLayer]]:
+    """(background, recorded vehicles by actor id, their shadow layers) as :func:`reconstruct`
+    wrote them under ``folder``."""
+    folder = Path(folder)
+    actors = {p.stem: read_splats(p) for p in sorted((folder / "actors").glob("*.ply"))}
+    layers = {name: folder / "actors" / f"{name}{SHADOW_SUFFIX}" for name in actors}
+    shadows = {name: ShadowLayer.load(path) for name, path in layers.items() if path.is_file()}
+    return read_splats(folder / "background.ply"), actors, shadows
 
 
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
@@ -503,7 +517,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     poses = run.poses()
     if poses:
         pose_refine.write_refined(out, poses)
-    shadows = run.shadows.fitted() if run.shadows is not None else {}
+    shadows = run.layers()
     for name, layer in shadows.items():
         layer.save(out / "actors" / f"{name}{SHADOW_SUFFIX}")
     corrections = {p.name: {"pose_correction": p.refine.corrections()} for p in run.parts if p.refine is not None}
