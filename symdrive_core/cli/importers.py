@@ -70,6 +70,9 @@ def add_commands(sub) -> None:
                    help="folder with image_2/image_3 (or image_0/image_1, image_l/image_r), or one of them alone, "
                         "and calib.txt")
     p.add_argument("--poses", help="the sequence's poses file, metres (default: SEQUENCE_DIR/poses.txt)")
+    p.add_argument("--rig", action="store_true",
+                   help="a stereo pair's cameras both trained on (the package's second camera is the right one); "
+                        "default: the right camera's images are lateral ground truth, not trained on")
     _common(p, images=False)
     p.set_defaults(func=_kitti)
     _kitti_raw_command(isub)
@@ -341,6 +344,8 @@ def _kitti(args) -> int:
     if right is None:
         print(f"one camera: {src.notes['image_folder']} (KITTI camera {src.notes['kitti_camera']}), no lateral "
               "ground truth")
+    elif args.rig:
+        print(f"a rig of two cameras: {args.camera_name} and {right}, both trained on")
     else:
         src.grouped, src.lateral = split_rig(src.grouped, right)
     # KITTI's poses are metric: scale 1, and the ground --camera-height below the cameras' median

@@ -26,7 +26,7 @@ from .region import convex_hull, inside_convex, vehicle_ground_z
 
 LAYER_CELL_M = 0.1
 LAYER_MARGIN_M = 0.5  # room beyond the farthest the box's shadow reaches (soft edges, box error)
-INITIAL_SHADOW = 0.5  # the start inside the box's shadow: a guess either way
+INITIAL_SHADOW = 0.9  # the start inside the box's shadow: a car blocks the sun (but for its windows)
 INITIAL_LIT = 0.02  # the start outside it
 
 

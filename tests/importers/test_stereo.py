@@ -240,3 +240,17 @@ def test_kitti_splats_in_the_poses_frame_score_like_the_demo(rig, tmp_path, caps
                               [_truth_frames()[0][i] for i in frames])
     assert abs(imported[0]["psnr"] - native[0]["psnr"]) < 0.05, (imported, native)
     assert abs(imported[0]["ssim"] - native[0]["ssim"]) < 2e-3
+
+
+def test_kitti_rig_trains_both_cameras_the_right_one_at_the_calibrated_baseline(rig, tmp_path, capsys):
+    seq = _write_kitti(rig, tmp_path / "seq")
+    m, printed = _import(["kitti", str(seq), "--copy-images", "--camera-name", "left", "--rig"], tmp_path / "pkg",
+                         capsys)
+    assert "both trained on" in printed and "lateral" not in (m.ground_truth or {})
+    check_files(m)
+    left, right = m.cameras
+    assert (left.name, right.name) == ("left", "left_right")
+    for a, b in zip(left.frames, right.frames):
+        rel = np.linalg.inv(a.camera_to_world) @ b.camera_to_world
+        assert np.allclose(rel[:3, :3], np.eye(3), atol=1e-9) and np.allclose(rel[:3, 3], [BASELINE, 0, 0], atol=1e-6)
+        assert b.image is not None
