@@ -45,6 +45,10 @@ def add_commands(sub) -> None:
     p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
                    f"0 = off (default {default_of(ReconstructConfig, 'sensor_depth_weight')} where the depth is LiDAR's, "
                    "sparse, as `import lidar` writes it; else 0)")
+    p.add_argument("--exposure", choices=("off", "camera", "frame"),
+                   help="each view's render through a learnt affine colour transform before the loss: one per camera "
+                        "but the first ('camera'), one per view ('frame'), or none "
+                        f"(default {default_of(ReconstructConfig, 'exposure')})")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
     p.add_argument("--densify-until", type=unit_fraction, metavar="F",
@@ -79,7 +83,8 @@ def _reconstruct(args) -> int:
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
-                                    "max_init_points", "seed", densify_until_fraction="densify_until"))
+                                    "max_init_points", "seed", "exposure",
+                                    densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
     if args.static:
@@ -101,7 +106,8 @@ def _reconstruct(args) -> int:
 
         if metrics["heldout_frames"]:
             metrics["heldout"] = evaluate_heldout(manifest, result.gaussians, metrics["heldout_frames"],
-                                                  actors=result.actors, shadows=result.shadows)
+                                                  actors=result.actors, shadows=result.shadows,
+                                                  exposure=result.exposure)
         if args.lateral:
             metrics["lateral"] = evaluate_lateral(manifest, result.gaussians)
         write_text_atomic(Path(out) / "metrics.json", json.dumps(metrics, indent=1) + "\n")

@@ -26,11 +26,13 @@ from .lane_paint import lane_truth
 
 def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int] | None = None,
                      camera: str | None = None, actors: dict[str, Gaussians] | None = None,
-                     shadows: dict | None = None) -> dict:
+                     shadows: dict | None = None, exposure: dict | None = None) -> dict:
     """{"psnr_heldout", "ssim_heldout", "frames"} over the held-out training-drive frames of
     ``camera``, else of every camera a reconstruction trains on (then also "cameras": the same
     per camera); with ``actors`` (a decomposed reconstruction's recorded vehicles, by actor id)
-    they are rendered where the drive saw them, with their ``shadows`` (shadow layers, by actor id)."""
+    they are rendered where the drive saw them, with their ``shadows`` (shadow layers, by actor id).
+    A camera with a fitted colour transform (``exposure``, by camera name) is scored through it."""
+    from ..optim.exposure import recorded_colours
     from ..optim.views import training_cameras
 
     frames = split_frames(manifest)[1] if frames is None else list(frames)
@@ -41,7 +43,7 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     for cam in cams:
         scores = []
         for i in frames:
-            pred = render(CameraView.of_frame(cam, i), i)
+            pred = recorded_colours(render(CameraView.of_frame(cam, i), i), (exposure or {}).get(cam.name))
             gt = read_image(manifest.resolve(cam.frames[i].image), channels=3)
             scores.append((psnr(pred, gt), ssim(pred, gt)))
         by_camera[cam.name] = scores

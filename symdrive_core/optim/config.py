@@ -74,6 +74,11 @@ class ReconstructConfig:
     # Where the scene has a sun, each recorded vehicle's shadow is a layer fitted with the
     # Gaussians (:mod:`.recorded_shadows`), at this learning rate on its occlusion logits.
     shadow_lr: float = 0.05
+    # Each view's render through a learnt affine colour transform before the loss
+    # (:mod:`.exposure`): "camera" (one per camera but the first, which the scene's colours are
+    # in), "frame" (one per view, pulled towards the identity) or "off".
+    exposure: str = "camera"
+    lr_exposure: float = 1e-3
 
     def downscale_at(self, it: int) -> int:
         """The factor the training images are downscaled by at iteration ``it`` (a power of 2)."""

@@ -36,6 +36,7 @@ from ..splat.render import Layer, activate, params_from_gaussians, render_layers
 from . import decompose, pose_refine
 from .config import DensifyConfig, ReconstructConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
+from .exposure import Exposure
 from .losses import photometric
 from .recorded_shadows import RecordedShadows
 from .views import Levels, View, load_views, training_cameras
@@ -265,12 +266,13 @@ def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool)
 
 def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructConfig, start: int, *,
               until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None,
-              shadows: RecordedShadows | None = None) -> dict:
+              shadows: RecordedShadows | None = None, exposure: Exposure | None = None) -> dict:
     """Optimise ``parts`` jointly against ``views`` from iteration ``start`` to ``until`` (default
     ``cfg.iters``; a fit run in segments passes its :class:`Levels` so a coarse level is computed
     once): the training loop with density control per part (``keep(part) -> [N] bool``, optional:
     which Gaussians a part may keep after each density step; ``shadows``, optional: the recorded
-    vehicles' shadows laid on each render). Every schedule is a function of the
+    vehicles' shadows laid on each render; ``exposure``, optional: each view's colour transform).
+    Every schedule is a function of the
     iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
     seconds, the iteration each image downscale began at, densification steps)."""
     from tqdm import tqdm
@@ -301,6 +303,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0 or shadows is not None)
         if shadows is not None:
             rgb = shadows.apply(rgb, info, view, present)
+        if exposure is not None:
+            rgb = exposure.apply(rgb, view)
         loss = photometric(rgb, view.image, cfg.ssim_lambda)
         if depth_weight > 0:
             dl = depth_loss(info, alpha, view.depth)
@@ -308,10 +312,14 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 loss = loss + depth_weight * dl
         for r in refining:
             loss = loss + r.penalty(n_views)
+        prior = None if exposure is None else exposure.penalty(n_views)
+        if prior is not None:
+            loss = loss + prior
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
-        if shadows is not None:
-            shadows.zero_grad()
+        for extra in (shadows, exposure):
+            if extra is not None:
+                extra.zero_grad()
         means2d = info["means2d"]
         means2d.retain_grad()
         loss.backward()
@@ -324,8 +332,9 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 row += n
         for part in parts:
             part.opt.step()
-        if shadows is not None:
-            shadows.step()
+        for extra in (shadows, exposure):
+            if extra is not None:
+                extra.step()
         for r in refining:
             r.step(it)
         step = it + 1
@@ -344,7 +353,9 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                     if part.refine is not None:
                         part.refine.save(part.checkpoint.folder)
             if shadows is not None and parts[0].checkpoint is not None:
-                shadows.save(parts[0].checkpoint.folder / "actors")
+                shadows.save(parts[0].checkpoint.folder)
+            if exposure is not None and parts[0].checkpoint is not None:
+                exposure.checkpoint(parts[0].checkpoint.folder)
     bar.close()
     if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
         # for the result too
@@ -382,6 +393,7 @@ class ReconstructResult:
     actors: dict[str, Gaussians] = field(default_factory=dict)  # recorded vehicles, each in its own frame
     poses: dict[str, list] = field(default_factory=dict)  # tracked vehicles' refined poses, per frame
     shadows: dict[str, ShadowLayer] = field(default_factory=dict)  # recorded vehicles' shadow layers
+    exposure: dict[str, np.ndarray] = field(default_factory=dict)  # cameras' colour transforms [3, 4]
 
 
 def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path | None,
@@ -436,6 +448,7 @@ class Fit:
     heldout_frames: list[int]
     extent: float
     shadows: RecordedShadows | None = None  # the recorded vehicles' shadows, where the scene has a sun
+    exposure: Exposure | None = None  # the cameras' colour transforms, where more than one trains
 
     @staticmethod
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
@@ -460,15 +473,19 @@ class Fit:
         # the depth maps seeded the sky; the loss reads those of the cameras it weighs
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
-        if shadows is not None and resume and checkpoint is not None:
-            shadows.load(checkpoint.folder / "actors")
+        exposure = Exposure.of(views, cfg.exposure, cfg.lr_exposure)
+        if resume and checkpoint is not None:
+            if shadows is not None:
+                shadows.load(checkpoint.folder)
+            if exposure is not None:
+                exposure.resume(checkpoint.folder)
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
-                   extent, shadows)
+                   extent, shadows, exposure)
 
     def train(self, until: int | None = None, progress: bool = True) -> dict:
         """Train to iteration ``until`` (default: the end); :func:`fit_parts`' log."""
         log = fit_parts(self.levels, self.parts, self.cfg, self.iteration, until=until, progress=progress,
-                        keep=self.keep, shadows=self.shadows)
+                        keep=self.keep, shadows=self.shadows, exposure=self.exposure)
         self.iteration = self.cfg.iters if until is None else min(until, self.cfg.iters)
         return log
 
@@ -502,7 +519,8 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     ``out/background.ply``, ``out/actors/<id>.ply``, ``out/checkpoint/``, ``out/metrics.json``
     (the fit: iterations, timings, frames), where tracked vehicles' poses were refined
     (:mod:`.pose_refine`), ``out/poses.json``, and where the scene has a sun each vehicle's shadow
-    layer (:mod:`.recorded_shadows`), ``out/actors/<id>.shadow.safetensors``. Scoring the result is the caller's
+    layer (:mod:`.recorded_shadows`), ``out/actors/<id>.shadow.safetensors``, and where cameras'
+    colours were fitted (:mod:`.exposure`), ``out/exposure.json``. Scoring the result is the caller's
     (``eval.views.evaluate_heldout`` on the held-out frames, ``pose_refine.with_refined`` placing
     the vehicles where they were fitted)."""
     out = Path(out)
@@ -517,6 +535,9 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     poses = run.poses()
     if poses:
         pose_refine.write_refined(out, poses)
+    exposure = {} if run.exposure is None else run.exposure.by_camera()
+    if run.exposure is not None:
+        run.exposure.save(out)
     shadows = run.layers()
     for name, layer in shadows.items():
         layer.save(out / "actors" / f"{name}{SHADOW_SUFFIX}")
@@ -527,6 +548,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                "extent_m": round(run.extent, 3), "cameras": sorted({v.camera_name for v in run.levels.views}),
                "views": len(run.levels.views), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
-               "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()}}
+               "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()},
+               **({"exposure": {cam: np.round(m, 4).tolist() for cam, m in exposure.items()}} if exposure else {})}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-    return ReconstructResult(g, metrics, out, actors, poses, shadows)
+    return ReconstructResult(g, metrics, out, actors, poses, shadows, exposure)

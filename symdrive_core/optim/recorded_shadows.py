@@ -24,8 +24,9 @@ from ..scene import Manifest
 from ..scene.poses import Pose
 from ..shadows.cast import occlusion_image, shaded, union
 from ..shadows.layer import ShadowLayer
+from .param_state import load_params, save_params
 
-LAYER_FILE = "shadow.safetensors"  # a layer's checkpoint, beside its vehicle's
+LAYER_FILE = "shadows.safetensors"  # the layers' checkpoint
 
 
 @dataclass
@@ -95,34 +96,16 @@ class RecordedShadows:
         return {name: learnt.layer() for name, learnt in self.layers.items()}
 
     def save(self, folder: Path) -> None:
-        """Each layer's logits and Adam moments under ``folder/<actor id>/``."""
-        from safetensors.torch import save_file
-
-        from ..io.atomic import atomic_path
-
-        for name, learnt in self.layers.items():
-            tensors = {"logits": learnt.logits.detach()}
-            state = self.opt.state.get(learnt.logits, {})
-            for key in ("exp_avg", "exp_avg_sq", "step"):
-                if key in state:
-                    tensors[key] = state[key].reshape(-1) if key == "step" else state[key]
-            with atomic_path(Path(folder) / name / LAYER_FILE) as tmp:
-                save_file({k: v.contiguous() for k, v in tensors.items()}, str(tmp))
+        """The layers' logits and Adam moments in ``folder/shadows.safetensors``."""
+        save_params(Path(folder) / LAYER_FILE, self._params(), self.opt)
 
     def load(self, folder: Path) -> None:
-        """Continue from :meth:`save`'s files (a layer without one starts afresh)."""
-        from safetensors.torch import load_file
+        """Continue from :meth:`save`'s file, where there is one."""
+        if (Path(folder) / LAYER_FILE).is_file():
+            load_params(Path(folder) / LAYER_FILE, self._params(), self.opt)
 
-        for name, learnt in self.layers.items():
-            path = Path(folder) / name / LAYER_FILE
-            if not path.is_file():
-                continue
-            saved = load_file(str(path))
-            with torch.no_grad():
-                learnt.logits.copy_(saved["logits"])
-            if "step" in saved:
-                self.opt.state[learnt.logits] = {"step": saved["step"].reshape(()), "exp_avg": saved["exp_avg"],
-                                                 "exp_avg_sq": saved["exp_avg_sq"]}
+    def _params(self) -> dict[str, torch.nn.Parameter]:
+        return {name: learnt.logits for name, learnt in self.layers.items()}
 
 
 def _pose(part, frame: int) -> Pose:

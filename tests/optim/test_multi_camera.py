@@ -22,9 +22,10 @@ from tests.optim.moving_box import N_FRAMES, H, W, box_pose, camera_c2w, street,
 BASELINE_M = 1.2  # the second camera's place to the right of the first (a wide stereo rig)
 
 
-def add_camera(root, name: str, offset_m: float, images: bool = True):
+def add_camera(root, name: str, offset_m: float, images: bool = True, colours=None):
     """The package at ``root`` with a camera ``offset_m`` to the right of ``front``, its images
-    rendered from the true scene (or none: a camera that recorded nothing)."""
+    rendered from the true scene (or none: a camera that recorded nothing), through ``colours``
+    (an image -> image function: the camera's own exposure) where given."""
     m = load_manifest(root)
     bg, car = GaussianTensors.from_gaussians(street()), GaussianTensors.from_gaussians(true_box())
     K = m.cameras[0].frames[0].K
@@ -36,7 +37,8 @@ def add_camera(root, name: str, offset_m: float, images: bool = True):
             with torch.no_grad():
                 out = render_scene(bg, [(car, box_pose(i), 1)], CameraView(conventions.invert_rigid(c2w), K, W, H))
             image = f"{name}/{i:03d}.png"
-            write_image(root / image, out["rgb"].clamp(0, 1).numpy())
+            rgb = out["rgb"].clamp(0, 1).numpy()
+            write_image(root / image, rgb if colours is None else np.clip(colours(rgb), 0, 1))
         frames.append(CameraFrame(K, c2w, conventions.invert_rigid(c2w), image))
     m.cameras.append(Camera(name, W, H, frames))
     m.save()
