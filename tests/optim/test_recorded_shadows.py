@@ -197,3 +197,18 @@ def test_a_package_names_a_vehicles_shadow_layer_and_checks_it(shadowed, tmp_pat
     (root / "manifest.json").write_text(json.dumps(data))
     with pytest.raises(ManifestError, match="only an existing actor has a learnt shadow layer"):
         load_manifest(root)
+
+
+def test_the_layers_resume_from_the_checkpoint(shadowed, tmp_path):
+    m, *_ = shadowed
+    cfg = ReconstructConfig(iters=60, densify_from=100, sky_points=0, actor_points=300, checkpoint_every=30,
+                            sh_degree=0)
+    first = reconstruct(m, tmp_path / "fit", cfg, progress=False)
+    back = RecordedShadows.of(m, tracks(m), cfg.shadow_lr)
+    back.load(tmp_path / "fit" / "checkpoint")
+    learnt = back.layers["car_1"]
+    assert np.allclose(learnt.layer().occlusion, first.shadows["car_1"].occlusion, atol=1e-7)
+    assert int(back.opt.state[learnt.logits]["step"]) == 60
+    second = reconstruct(m, tmp_path / "fit", dataclasses.replace(cfg, iters=80), resume=True, progress=False)
+    assert second.metrics["resumed_from"] == 60 and not np.array_equal(second.shadows["car_1"].occlusion,
+                                                                        first.shadows["car_1"].occlusion)
