@@ -21,10 +21,9 @@ import numpy as np
 import torch
 
 from ..io.atomic import write_text_atomic
-from .param_state import load_params, save_params
+from .param_state import SideParameters
 
 EXPOSURE_FILE = "exposure.json"
-CHECKPOINT_FILE = "exposure.safetensors"
 MODES = ("off", "camera", "frame")
 FRAME_PRIOR = 1.0  # weight of |M - [I | 0]|^2 per view in the per-view mode (its gauge)
 
@@ -33,8 +32,10 @@ def _identity() -> torch.Tensor:
     return torch.cat([torch.eye(3), torch.zeros(3, 1)], 1)
 
 
-class Exposure:
+class Exposure(SideParameters):
     """The learnt transforms of one fit: by camera name, or by (camera name, frame)."""
+
+    checkpoint_file = "exposure.safetensors"
 
     def __init__(self, mode: str, reference: str, keys: list, lr: float):
         if mode not in MODES[1:]:
@@ -68,14 +69,6 @@ class Exposure:
         total = sum(((m - _identity()) ** 2).sum() for m in self.transforms.values())
         return FRAME_PRIOR * total / max(n_views, 1)
 
-    def zero_grad(self) -> None:
-        if self.opt is not None:
-            self.opt.zero_grad(set_to_none=True)
-
-    def step(self) -> None:
-        if self.opt is not None:
-            self.opt.step()
-
     def by_camera(self) -> dict[str, np.ndarray]:
         """Each camera's transform [3, 4] as it stands (per view: the mean of its frames'); the
         reference camera keeps the identity in the per-camera mode."""
@@ -84,17 +77,8 @@ class Exposure:
             groups.setdefault(k if self.mode == "camera" else k[0], []).append(m.detach().double().numpy())
         return {cam: np.mean(ms, axis=0) for cam, ms in groups.items()}
 
-    def _params(self) -> dict[str, torch.nn.Parameter]:
+    def params(self) -> dict[str, torch.nn.Parameter]:
         return {k if isinstance(k, str) else f"{k[0]}/{k[1]}": m for k, m in self.transforms.items()}
-
-    def checkpoint(self, folder: Path) -> None:
-        """The transforms and their Adam moments in ``folder/exposure.safetensors``."""
-        save_params(Path(folder) / CHECKPOINT_FILE, self._params(), self.opt)
-
-    def resume(self, folder: Path) -> None:
-        """Continue from :meth:`checkpoint`'s file, where there is one."""
-        if (Path(folder) / CHECKPOINT_FILE).is_file():
-            load_params(Path(folder) / CHECKPOINT_FILE, self._params(), self.opt)
 
     def save(self, folder: Path) -> None:
         """``folder/exposure.json``: the mode, the reference camera and each camera's transform."""

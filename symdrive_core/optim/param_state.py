@@ -1,5 +1,6 @@
-"""Small learnt parameters beside the Gaussians (shadow layers, exposure transforms) saved with
-their Adam moments, so a resumed fit continues them exactly where it stopped."""
+"""Small learnt parameters beside the Gaussians (shadow layers, exposure transforms): their own
+Adam, stepped with the fit, and saved with its moments so a resumed fit continues them exactly
+where it stopped."""
 
 from __future__ import annotations
 
@@ -37,3 +38,31 @@ def load_params(path: Path, params: dict[str, torch.nn.Parameter], opt: torch.op
         if f"{name}.step" in saved:
             opt.state[p] = {"step": saved[f"{name}.step"].reshape(()), "exp_avg": saved[f"{name}.exp_avg"],
                             "exp_avg_sq": saved[f"{name}.exp_avg_sq"]}
+
+
+class SideParameters:
+    """What a fit steps and checkpoints beside its Gaussians: subclasses set ``opt`` (None: nothing
+    to fit) and ``checkpoint_file``, and name their parameters in :meth:`params`."""
+
+    checkpoint_file: str
+    opt: torch.optim.Adam | None
+
+    def params(self) -> dict[str, torch.nn.Parameter]:
+        raise NotImplementedError
+
+    def zero_grad(self) -> None:
+        if self.opt is not None:
+            self.opt.zero_grad(set_to_none=True)
+
+    def step(self) -> None:
+        if self.opt is not None:
+            self.opt.step()
+
+    def checkpoint(self, folder: Path) -> None:
+        """The parameters and their Adam moments in ``folder/<checkpoint_file>``."""
+        save_params(Path(folder) / self.checkpoint_file, self.params(), self.opt)
+
+    def resume(self, folder: Path) -> None:
+        """Continue from :meth:`checkpoint`'s file, where there is one."""
+        if (Path(folder) / self.checkpoint_file).is_file():
+            load_params(Path(folder) / self.checkpoint_file, self.params(), self.opt)

@@ -352,10 +352,9 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                     part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
                     if part.refine is not None:
                         part.refine.save(part.checkpoint.folder)
-            if shadows is not None and parts[0].checkpoint is not None:
-                shadows.save(parts[0].checkpoint.folder)
-            if exposure is not None and parts[0].checkpoint is not None:
-                exposure.checkpoint(parts[0].checkpoint.folder)
+            for extra in (shadows, exposure):
+                if extra is not None and parts[0].checkpoint is not None:
+                    extra.checkpoint(parts[0].checkpoint.folder)
     bar.close()
     if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
         # for the result too
@@ -474,11 +473,9 @@ class Fit:
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
         exposure = Exposure.of(views, cfg.exposure, cfg.lr_exposure)
-        if resume and checkpoint is not None:
-            if shadows is not None:
-                shadows.load(checkpoint.folder)
-            if exposure is not None:
-                exposure.resume(checkpoint.folder)
+        for extra in (shadows, exposure):
+            if extra is not None and resume and checkpoint is not None:
+                extra.resume(checkpoint.folder)
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
                    extent, shadows, exposure)
 

@@ -14,7 +14,6 @@ its shadow, and the background behind it as the road in sunlight.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -24,9 +23,7 @@ from ..scene import Manifest
 from ..scene.poses import Pose
 from ..shadows.cast import occlusion_image, shaded, union
 from ..shadows.layer import ShadowLayer
-from .param_state import load_params, save_params
-
-LAYER_FILE = "shadows.safetensors"  # the layers' checkpoint
+from .param_state import SideParameters
 
 
 @dataclass
@@ -44,8 +41,10 @@ class LearntLayer:
         return ShadowLayer(self.occlusion().detach().numpy().astype(np.float32), self.grid.origin, self.grid.cell)
 
 
-class RecordedShadows:
+class RecordedShadows(SideParameters):
     """The sun, the shade, and the shadow layers of one decomposed fit's vehicles."""
+
+    checkpoint_file = "shadows.safetensors"
 
     def __init__(self, sun: np.ndarray, ratio: float, layers: dict[str, LearntLayer], lr: float):
         self.sun, self.ratio, self.layers = sun, ratio, layers
@@ -83,28 +82,11 @@ class RecordedShadows:
         covered = 1.0 - torch.prod(1.0 - info["instance"].detach().clamp(0.0, 1.0), dim=-1, keepdim=True)
         return rgb + (1.0 - covered) * (shaded(rgb, occ, self.ratio) - rgb)
 
-    def zero_grad(self) -> None:
-        if self.opt is not None:
-            self.opt.zero_grad(set_to_none=True)
-
-    def step(self) -> None:
-        if self.opt is not None:
-            self.opt.step()
-
     def fitted(self) -> dict[str, ShadowLayer]:
         """Each vehicle's layer as it stands, by actor id."""
         return {name: learnt.layer() for name, learnt in self.layers.items()}
 
-    def save(self, folder: Path) -> None:
-        """The layers' logits and Adam moments in ``folder/shadows.safetensors``."""
-        save_params(Path(folder) / LAYER_FILE, self._params(), self.opt)
-
-    def load(self, folder: Path) -> None:
-        """Continue from :meth:`save`'s file, where there is one."""
-        if (Path(folder) / LAYER_FILE).is_file():
-            load_params(Path(folder) / LAYER_FILE, self._params(), self.opt)
-
-    def _params(self) -> dict[str, torch.nn.Parameter]:
+    def params(self) -> dict[str, torch.nn.Parameter]:
         return {name: learnt.logits for name, learnt in self.layers.items()}
 
 

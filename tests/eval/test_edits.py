@@ -16,7 +16,7 @@ from symdrive_core.scene import Pose, load_manifest
 from symdrive_core.scene.camera import CameraView
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
-from tests.optim.moving_box import box_pose, street
+from tests.optim.moving_box import box_pose, street, traffic_truth_entries
 
 MOVE = np.array([0.0, -1.5, 0.0])  # a lane nearer the camera
 
@@ -29,16 +29,7 @@ def traffic_truth(moving_box, tmp_path_factory):
     root = tmp_path_factory.mktemp("traffic") / "pkg"
     shutil.copytree(src, root)
     m = load_manifest(root)
-    vehicles = {}
-    for f, t in truth.items():
-        write_mask(root / f"gt/vehicles/{f:06d}.png", t["mask"])
-        vehicles[str(f)] = f"gt/vehicles/{f:06d}.png"
-    edits = []
-    for j, f in enumerate((2, 6)):
-        write_image(root / f"gt/edits/{j}/image.png", truth[f]["background"])
-        write_mask(root / f"gt/edits/{j}/mask.png", truth[f]["mask"])
-        edits.append({"kind": "remove", "actor": "car_1", "camera": "front", "frame": f, "pose": None,
-                      "image": f"gt/edits/{j}/image.png", "mask": f"gt/edits/{j}/mask.png"})
+    vehicles, edits = traffic_truth_entries(root, truth)
     moved = Pose(box_pose(6).translation + MOVE, box_pose(6).rotation)
     with torch.no_grad():
         out = render_scene(GaussianTensors.from_gaussians(street()), [(GaussianTensors.from_gaussians(box), moved, 1)],
@@ -47,7 +38,7 @@ def traffic_truth(moving_box, tmp_path_factory):
     write_mask(root / "gt/edits/2/mask.png", out["instance"][..., 0].numpy() > 0.5)
     edits.append({"kind": "move", "actor": "car_1", "camera": "front", "frame": 6, "pose": moved.to_json(),
                   "lateral_m": -1.5, "image": "gt/edits/2/image.png", "mask": "gt/edits/2/mask.png"})
-    m.ground_truth = {**m.ground_truth, "vehicles": {"camera": "front", "frames": vehicles}, "edits": edits}
+    m.ground_truth = {**m.ground_truth, "vehicles": vehicles, "edits": edits}
     m.save()
     return load_manifest(root), result
 

@@ -102,3 +102,22 @@ def write_moving_box(root, sun=None):
                  effects=Effects(shadows=sun is not None, sun_direction=sun))
     m.save(root / "manifest.json")
     return root, box, truth, heldout
+
+
+def traffic_truth_entries(root, truth, removed=(2, 6)) -> tuple[dict, list[dict]]:
+    """Write the box's mask of every frame and removals of the box at the ``removed`` frames (the
+    truth's street without it) under ``root``: (``ground_truth.vehicles``, the removals'
+    ``ground_truth.edits`` entries)."""
+    from symdrive_core.io.images import write_mask
+
+    frames = {}
+    for f, t in truth.items():
+        write_mask(root / f"gt/vehicles/{f:06d}.png", t["mask"])
+        frames[str(f)] = f"gt/vehicles/{f:06d}.png"
+    edits = []
+    for j, f in enumerate(removed):
+        write_image(root / f"gt/edits/{j}/image.png", truth[f]["background"])
+        write_mask(root / f"gt/edits/{j}/mask.png", truth[f]["mask"])
+        edits.append({"kind": "remove", "actor": "car_1", "camera": "front", "frame": f, "pose": None,
+                      "image": f"gt/edits/{j}/image.png", "mask": f"gt/edits/{j}/mask.png"})
+    return {"camera": "front", "frames": frames}, edits

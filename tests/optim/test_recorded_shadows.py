@@ -11,13 +11,12 @@ import pytest
 import torch
 
 from symdrive_core.eval.edits import evaluate_decomposition, evaluate_edits
-from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.optim.decompose import tracks
 from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
 from symdrive_core.optim.recorded_shadows import RecordedShadows
 from symdrive_core.scene import Effects, load_manifest
 from symdrive_core.shadows.cast import shaded
-from tests.optim.moving_box import write_moving_box
+from tests.optim.moving_box import traffic_truth_entries, write_moving_box
 
 # Light travelling down and towards the recording camera: the box's shadow falls on the floor
 # between them, where every frame sees it.
@@ -55,17 +54,8 @@ def shadowed(tmp_path_factory):
     and as a scene without shadows fits it (the darkening left to the background)."""
     root, box, truth, heldout = write_moving_box(tmp_path_factory.mktemp("shadowed") / "pkg", sun=SUN)
     m = load_manifest(root)
-    edits = []
-    for j, f in enumerate((2, 6)):
-        write_image(root / f"gt/edits/{j}/image.png", truth[f]["background"])
-        write_mask(root / f"gt/edits/{j}/mask.png", truth[f]["mask"])
-        edits.append({"kind": "remove", "actor": "car_1", "camera": "front", "frame": f, "pose": None,
-                      "image": f"gt/edits/{j}/image.png", "mask": f"gt/edits/{j}/mask.png"})
-    vehicles = {}
-    for f, t in truth.items():
-        write_mask(root / f"gt/vehicles/{f:06d}.png", t["mask"])
-        vehicles[str(f)] = f"gt/vehicles/{f:06d}.png"
-    m.ground_truth = {**m.ground_truth, "edits": edits, "vehicles": {"camera": "front", "frames": vehicles}}
+    vehicles, edits = traffic_truth_entries(root, truth)
+    m.ground_truth = {**m.ground_truth, "edits": edits, "vehicles": vehicles}
     m.save()
     unlit = root.parent / "unlit"
     shutil.copytree(root, unlit)
@@ -133,7 +123,7 @@ def test_the_run_casts_the_shadows_of_recorded_vehicles_fitted_in_their_own_fram
 def test_a_layer_starts_as_its_boxs_shadow_and_moves_with_the_vehicle():
     from symdrive_core.rotations import quat_from_yaw
     from symdrive_core.scene import Pose
-    from symdrive_core.shadows.layer import ShadowLayer
+    from symdrive_core.shadows.layer import INITIAL_SHADOW, ShadowLayer
     from symdrive_core.shadows.region import inside_convex, shadow_polygon
 
     wlh = np.array([1.8, 4.5, 1.5])
@@ -146,7 +136,7 @@ def test_a_layer_starts_as_its_boxs_shadow_and_moves_with_the_vehicle():
     inside = inside_convex(pts, hull)
     occ = layer.at(start, wlh).sample(pts)
     far_in = inside_convex(pts, _shrunk(hull, 0.15))
-    assert np.allclose(occ[far_in], 0.5, atol=1e-6) and (occ[~inside] <= 0.5 + 1e-6).all()
+    assert np.allclose(occ[far_in], INITIAL_SHADOW, atol=1e-6) and (occ[~inside] <= INITIAL_SHADOW + 1e-6).all()
     # moved and turned, the grid goes along: a point fixed in the vehicle's frame reads the same
     moved = Pose(np.array([-7.0, 5.0, 1.75]), quat_from_yaw(-1.1))
     local = np.column_stack([rng.uniform(-3, 3, 50), rng.uniform(-2, 2, 50), np.full(50, -0.75)])
@@ -205,7 +195,7 @@ def test_the_layers_resume_from_the_checkpoint(shadowed, tmp_path):
                             sh_degree=0)
     first = reconstruct(m, tmp_path / "fit", cfg, progress=False)
     back = RecordedShadows.of(m, tracks(m), cfg.shadow_lr)
-    back.load(tmp_path / "fit" / "checkpoint")
+    back.resume(tmp_path / "fit" / "checkpoint")
     learnt = back.layers["car_1"]
     assert np.allclose(learnt.layer().occlusion, first.shadows["car_1"].occlusion, atol=1e-7)
     assert int(back.opt.state[learnt.logits]["step"]) == 60
