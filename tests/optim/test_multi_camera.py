@@ -2,6 +2,7 @@
 frames are held out from each, and each camera is scored."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -89,7 +90,8 @@ def test_the_second_camera_is_seen_better_by_the_fit_that_trained_on_it(rig):
     assert right_both > right_one + 1.0
 
 
-def test_the_default_run_renders_and_restores_every_camera(rig, tmp_path):
+def test_a_run_renders_restores_and_refines_every_camera(rig, tmp_path):
+    """(The restorer's adaptation, the run's slowest default stage, is tested on one camera.)"""
     from symdrive_core.cli import main
 
     m, both, _ = rig
@@ -98,7 +100,9 @@ def test_the_default_run_renders_and_restores_every_camera(rig, tmp_path):
     m.effects.lateral_offsets = [1.0]
     m.save()
     out = tmp_path / "out"
-    assert main(["run", str(m.root), "--out", str(out), "--quiet", "--frames", "2,6"]) == 0
+    assert main(["run", str(m.root), "--out", str(out), "--quiet", "--frames", "2,6", "--no-adapt"]) == 0
+    stages = {s["name"]: s for s in json.loads((out / "report.json").read_text())["stages"]}
+    assert stages["refine"]["ran"] and stages["restore"]["ran"]
     for cam in ("front", "right"):
         assert sorted(p.name for p in (out / "render" / cam).glob("*.png")) == ["000002.png", "000006.png"]
         assert sorted(p.name for p in (out / "restore" / cam / "+1").glob("*.png")) == ["000002.png", "000006.png"]
