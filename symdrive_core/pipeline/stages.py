@@ -83,6 +83,7 @@ class Shared:
     background_path: Path | None = None  # a reconstruction this run fitted (the package had none)
     actors: dict = field(default_factory=dict)  # its recorded vehicles' Gaussians, by actor id
     shadows: dict | None = None  # their shadow layers, by actor id
+    exposure: dict = field(default_factory=dict)  # its cameras' colour transforms, when it fitted them
     restorer: object = None
     drive: dict | None = None  # diffusion.adapt.drive_identity of the package and its reconstruction
     adapted: Path | None = None  # the folder of this drive's adapted restorer
@@ -209,6 +210,7 @@ def reconstruct_stage(ctx) -> StageResult:
     ctx.shared.background_path = out / "background.ply"
     ctx.shared.actors = result.actors
     ctx.shared.shadows = result.shadows
+    ctx.shared.exposure = result.exposure
     return StageResult({"gaussians": len(result.gaussians), "actors": {k: len(g) for k, g in result.actors.items()},
                         "depth_weight": result.metrics["depth_weight"]})
 
@@ -477,7 +479,7 @@ def evaluate_stage(ctx) -> StageResult:
     has_background = background_path(ctx) is not None
     if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
         metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx),
-                                                     shadows=recorded_shadows(ctx))
+                                                     shadows=recorded_shadows(ctx), exposure=ctx.shared.exposure)
     if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))
