@@ -51,7 +51,7 @@ def _check_free(scene, existing) -> None:
 
 def build_existing(context, manifest, actor, bg: np.ndarray, frames, max_points: int = 0) -> bpy.types.Object:
     """One existing actor: its root keyed on ``actor.poses`` at ``frames``, its parts, its recorded
-    track and, when a reconstruction refined it, its tracked boxes."""
+    track and, when a reconstruction refined it, its tracked boxes; its learnt shadow layer, if any."""
     collection = context.collection
     root = bpy.data.objects.new(actor.id, None)
     root.empty_display_type, root.empty_display_size = "ARROWS", 1.0
@@ -68,6 +68,7 @@ def build_existing(context, manifest, actor, bg: np.ndarray, frames, max_points:
         s.recorded_poses = recorded.encode(frames[0], actor.recorded_poses or actor.poses)
         if actor.tracked_poses is not None:
             s.tracked_poses = recorded.encode(frames[0], actor.tracked_poses)
+        s.shadow_path = str(manifest.resolve(actor.shadow)) if actor.shadow else ""
     except BaseException:
         _remove(root)
         raise

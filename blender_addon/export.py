@@ -42,6 +42,7 @@ class _Actor:
     root: bpy.types.Object
     splats: str | None  # absolute paths on this machine
     mesh: str | None
+    shadow: str | None = None  # a recorded vehicle's learnt shadow layer
     mesh_in_package: str | None = None  # package-relative GLB written by the export (mesh-only actors)
 
 
@@ -94,10 +95,11 @@ def _collect_actors(scene) -> list[_Actor]:
         mesh = bpy.path.abspath(s.mesh_path) if s.mesh_path else None
         if splats is None and mesh is None and not _awaits_reconstruction(root):
             raise errors.InputError(root.name, "actor has neither a splat cloud nor a mesh file", "assets")
-        for path in (splats, mesh):
+        shadow = bpy.path.abspath(s.shadow_path) if s.kind == "existing" and s.shadow_path else None
+        for path in (splats, mesh, shadow):
             if path and not os.path.isfile(path):
                 raise errors.InputError(path, f"asset of actor {s.actor_id!r} not found", "assets")
-        out.append(_Actor(root, splats, mesh))
+        out.append(_Actor(root, splats, mesh, shadow=shadow))
     ids = [a.root.symdrive.instance_id for a in out]
     if len(set(ids)) != len(ids) or min(ids, default=1) < 1:
         raise errors.InputError(
@@ -302,6 +304,7 @@ def _manifest_actor(a: _Actor, poses, asset: _AssetPaths, frame_numbers) -> scen
         instance_id=s.instance_id,
         recorded_poses=recorded_poses,
         tracked_poses=tracked_poses,
+        shadow=asset(a.shadow),
     )
 
 

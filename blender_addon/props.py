@@ -67,6 +67,12 @@ class SymDriveObjectSettings(bpy.types.PropertyGroup):
         description="An existing actor's track as the drive recorded it (JSON, see recorded.py): "
         "export compares its poses with it",
     )
+    shadow_path: StringProperty(
+        name="Shadow layer",
+        subtype="FILE_PATH",
+        description="An existing actor's learnt ground shadow (its reconstruction's shadow layer): exported with it, "
+        "so its shadow goes where it goes",
+    )
     tracked_poses: StringProperty(
         name="Tracked poses",
         options={"HIDDEN"},

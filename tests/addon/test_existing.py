@@ -236,3 +236,24 @@ def test_recorded_frames_snap_back_and_an_edit_keeps_the_track():
     assert rec is None and all(k is t for k, t in zip(kept, track))  # float32 drift is no edit
     kept, rec = recorded.against_recorded([drifted[0], None, drifted[2]], track)
     assert rec is track and kept[0] is track[0] and kept[1] is None
+
+
+@pytest.mark.blender
+def test_a_vehicles_shadow_layer_goes_with_it_through_export(blender, tmp_path):
+    """A recorded car's learnt shadow is its own: the export carries the layer file with it."""
+    from symdrive_core.scene import Pose
+    from symdrive_core.shadows.layer import ShadowLayer
+
+    package = write_package(tmp_path / "drive")
+    layer = ShadowLayer.initial(np.array([1.8, 4.0, 1.5]), np.array([0.3, -0.5, -0.8]),
+                                Pose(np.zeros(3), np.array([1.0, 0, 0, 0])))
+    layer.save(package / "actors" / "car_rec.shadow.safetensors")
+    d = json.loads((package / "manifest.json").read_text())
+    d["actors"][0]["assets"]["shadow"] = "actors/car_rec.shadow.safetensors"
+    (package / "manifest.json").write_text(json.dumps(d))
+    import_package(blender, package)
+    blender.context.scene.symdrive.copy_assets = True
+    m = export(blender, tmp_path / "out", write_masks=False)
+    assert m.actor(CAR).shadow is not None and m.actor(VAN).shadow is None
+    back = ShadowLayer.load(m.resolve(m.actor(CAR).shadow))
+    assert np.array_equal(back.occlusion, layer.occlusion) and np.allclose(back.origin, layer.origin)
