@@ -38,7 +38,7 @@ def evaluate_heldout(manifest: Manifest, gaussians: Gaussians, frames: list[int]
     frames = split_frames(manifest)[1] if frames is None else list(frames)
     if not frames:
         raise ValueError("evaluate_heldout: the package holds out no frames")
-    cams = [manifest.camera(camera)] if camera else training_cameras(manifest) or manifest.cameras[:1]
+    cams = [manifest.camera(camera)] if camera else training_cameras(manifest)
     render, by_camera = recorded_renderer(manifest, gaussians, actors, shadows), {}
     for cam in cams:
         scores = []

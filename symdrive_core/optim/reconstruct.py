@@ -6,8 +6,9 @@ trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the pac
 maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
 with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
 step by step, clone/split/prune density control, and optionally images coarse to fine
-(``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every camera that recorded images
-trains (a rig's cameras see the street from places one camera never is); every k-th frame of the
+(``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every camera that recorded an image at
+every frame trains beside the first (a rig's cameras see the street from places one camera never
+is); every k-th frame of the
 drive is held out for evaluation, from every camera. Checkpoints are a splat PLY plus the optimizer state in
 safetensors, so ``--resume`` continues exactly where a run stopped.
 """
@@ -453,7 +454,7 @@ class Fit:
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
         """The background, and with ``cfg.decompose`` one part per recorded vehicle; checkpointed
         under ``out`` (None: not at all)."""
-        cameras = training_cameras(manifest) or manifest.cameras[:1]
+        cameras = training_cameras(manifest)
         weights = {c.name: cfg.depth_weight_for(c) for c in cameras}
         cfg = replace(cfg, depth_weight=max(weights.values()))
         train_frames, heldout = split_frames(manifest, cfg.holdout_every)

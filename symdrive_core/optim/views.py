@@ -60,15 +60,17 @@ def held_pixels(image: np.ndarray) -> torch.Tensor:
 
 
 def training_cameras(manifest: Manifest) -> list:
-    """The package's cameras that recorded images: what a reconstruction trains on (a camera
-    with no image at all, such as a rendered viewpoint, has nothing to fit)."""
-    return [c for c in manifest.cameras if any(cf.image for cf in c.frames)]
+    """What a reconstruction trains on: the first camera, and each other camera that recorded an
+    image at every frame (one with none, such as a rendered viewpoint, or with gaps has nothing
+    the drive's split can hold out alike)."""
+    first, *others = manifest.cameras
+    return [first] + [c for c in others if all(cf.image for cf in c.frames)]
 
 
 def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:
     """The recorded views of ``frames``, frame by frame: of ``camera``, else of every camera that
     recorded images (:func:`training_cameras`; each must have an image at each frame)."""
-    cams = [manifest.camera(camera)] if camera else training_cameras(manifest) or manifest.cameras[:1]
+    cams = [manifest.camera(camera)] if camera else training_cameras(manifest)
     views = []
     for i in frames:
         for cam in cams:
