@@ -8,9 +8,9 @@ with per-parameter learning rates and an exponentially decaying position rate, S
 step by step, clone/split/prune density control, and optionally images coarse to fine
 (``ReconstructConfig.resolution_schedule``, :mod:`.views`). Every camera that recorded an image at
 every frame trains beside the first (a rig's cameras see the street from places one camera never
-is); every k-th frame of the
-drive is held out for evaluation, from every camera. Checkpoints are a splat PLY plus the optimizer state in
-safetensors, so ``--resume`` continues exactly where a run stopped.
+is); every k-th frame of the drive is held out for evaluation, from every camera. Checkpoints are
+a splat PLY plus the optimizer state in safetensors, so ``--resume`` continues exactly where a run
+stopped.
 """
 
 from __future__ import annotations
