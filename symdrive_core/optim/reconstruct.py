@@ -273,8 +273,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     once): the training loop with density control per part (``keep(part) -> [N] bool``, optional:
     which Gaussians a part may keep after each density step; ``shadows``, optional: the recorded
     vehicles' shadows laid on each render; ``exposure``, optional: each view's colour transform).
-    Every schedule is a function of the
-    iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
+    Every schedule is a function of the iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
     seconds, the iteration each image downscale began at, densification steps)."""
     from tqdm import tqdm
 
@@ -286,6 +285,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
     refining = [p.refine for p in parts if p.refine is not None]
+    extras = [x for x in (shadows, exposure) if x is not None]  # fitted beside the Gaussians
     log = {"resumed_from": start, "downscale": [], "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, until), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
@@ -301,7 +301,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 if group["name"] == "means":
                     group["lr"] = position_lr(cfg, part.extent, it)
         degree = cfg.sh_degree_at(it)
-        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0 or shadows is not None)
+        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
         if shadows is not None:
             rgb = shadows.apply(rgb, info, view, present)
         if exposure is not None:
@@ -318,9 +318,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
             loss = loss + prior
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
-        for extra in (shadows, exposure):
-            if extra is not None:
-                extra.zero_grad()
+        for extra in extras:
+            extra.zero_grad()
         means2d = info["means2d"]
         means2d.retain_grad()
         loss.backward()
@@ -333,9 +332,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 row += n
         for part in parts:
             part.opt.step()
-        for extra in (shadows, exposure):
-            if extra is not None:
-                extra.step()
+        for extra in extras:
+            extra.step()
         for r in refining:
             r.step(it)
         step = it + 1
@@ -353,8 +351,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                     part.checkpoint.save(part.params, part.opt, part.stats, step, cfg)
                     if part.refine is not None:
                         part.refine.save(part.checkpoint.folder)
-            for extra in (shadows, exposure):
-                if extra is not None and parts[0].checkpoint is not None:
+            if parts[0].checkpoint is not None:
+                for extra in extras:
                     extra.checkpoint(parts[0].checkpoint.folder)
     bar.close()
     if keep is not None and until == cfg.iters:  # Gaussians drift after the last density step: the roles hold
@@ -474,8 +472,8 @@ class Fit:
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
         exposure = Exposure.of(views, cfg.exposure, cfg.lr_exposure)
-        for extra in (shadows, exposure):
-            if extra is not None and resume and checkpoint is not None:
+        if resume and checkpoint is not None:
+            for extra in (x for x in (shadows, exposure) if x is not None):
                 extra.resume(checkpoint.folder)
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
                    extent, shadows, exposure)

@@ -85,7 +85,7 @@ class SceneRenderer:
         ``<out>/insertion_assets``); without it they are sampled in memory. ``actor_shadows``:
         recorded vehicles' shadow layers by actor id (a reconstruction this run fitted), in place
         of the package's (``assets.shadow``)."""
-        from ..shadows.layer import ShadowLayer
+        from ..shadows.layer import package_layers
         from ..splat.tensors import GaussianTensors
 
         self.manifest = manifest
@@ -98,8 +98,7 @@ class SceneRenderer:
         self.background = None if bg is None else GaussianTensors.from_gaussians(bg, device=self.device)
         self.actors = {}
         self.sources = {}  # inserted actor id -> Gaussians as read (what its cast shadow is computed from)
-        self.shadow_layers = {a.id: ShadowLayer.load(manifest.resolve(a.shadow)) for a in manifest.actors
-                              if a.shadow} | dict(actor_shadows or {})  # recorded vehicles' own shadows
+        self.shadow_layers = package_layers(manifest) | dict(actor_shadows or {})  # recorded vehicles' own shadows
         for a in manifest.actors:
             g = (actor_gaussians or {}).get(a.id)
             if g is None and (a.splats or a.mesh):

@@ -122,11 +122,10 @@ def recorded_vehicles(ctx) -> dict:
 def recorded_shadows(ctx) -> dict:
     """The recorded vehicles' shadow layers by actor id: this run's reconstruction's, else the
     package's (``assets.shadow``)."""
-    from ..shadows.layer import ShadowLayer
+    from ..shadows.layer import package_layers
 
     if ctx.shared.shadows is None:
-        ctx.shared.shadows = {a.id: ShadowLayer.load(ctx.manifest.resolve(a.shadow)) for a in ctx.manifest.actors
-                              if a.shadow}
+        ctx.shared.shadows = package_layers(ctx.manifest)
     return ctx.shared.shadows
 
 

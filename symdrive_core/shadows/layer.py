@@ -22,7 +22,7 @@ from .. import conventions
 from ..io.shadow_grid import read_shadow_grid, write_shadow_grid
 from ..scene import Pose
 from .cast import ShadowMap
-from .region import convex_hull, inside_convex, vehicle_ground_z
+from .region import inside_convex, shadow_polygon, vehicle_ground_z
 
 LAYER_CELL_M = 0.1
 LAYER_MARGIN_M = 0.5  # room beyond the farthest the box's shadow reaches (soft edges, box error)
@@ -48,10 +48,7 @@ class ShadowLayer:
         half = np.array([length / 2 + reach, w / 2 + reach])
         cols, rows = (int(np.ceil(2 * v / LAYER_CELL_M)) for v in half)
         origin = -0.5 * LAYER_CELL_M * np.array([cols, rows])
-        local_sun = pose.R.T @ s
-        corners = conventions.vehicle_box_corners(wlh)
-        on_ground = corners + ((-h / 2 - corners[:, 2]) / local_sun[2])[:, None] * local_sun
-        hull = convex_hull(np.concatenate([corners[:, :2], on_ground[:, :2]]))
+        hull = shadow_polygon(Pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])), wlh, pose.R.T @ s)
         x = origin[0] + LAYER_CELL_M * (np.arange(cols) + 0.5)
         y = origin[1] + LAYER_CELL_M * (np.arange(rows) + 0.5)
         centres = np.stack(np.meshgrid(x, y), -1)
@@ -73,3 +70,8 @@ class ShadowLayer:
     def load(path: Path) -> ShadowLayer:
         """A layer as :meth:`save` wrote it; a ValueError naming what is wrong otherwise."""
         return ShadowLayer(*read_shadow_grid(path))
+
+
+def package_layers(manifest) -> dict[str, ShadowLayer]:
+    """The shadow layers a package's recorded vehicles name (``assets.shadow``), by actor id."""
+    return {a.id: ShadowLayer.load(manifest.resolve(a.shadow)) for a in manifest.actors if a.shadow}
