@@ -121,7 +121,8 @@ def _reconstruct(args) -> int:
                 a.shadow = (Path(out) / "actors" / f"{a.id}{SHADOW_SUFFIX}").resolve().relative_to(root).as_posix() \
                     if a.id in result.shadows else None
         manifest.save()
-    summary = {k: metrics[k] for k in ("gaussians", "actors", "seconds", "seconds_per_iteration", "heldout", "lateral")
+    summary = {k: metrics[k] for k in ("gaussians", "actors", "cameras", "cameras_left_out", "seconds",
+                                       "seconds_per_iteration", "heldout", "lateral")
                if k in metrics and metrics[k] != {}}
     print(json.dumps(summary, indent=1))
     return 0

@@ -40,7 +40,7 @@ from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .exposure import Exposure
 from .losses import photometric
 from .recorded_shadows import RecordedShadows
-from .views import Levels, View, load_views, training_cameras
+from .views import Levels, View, cameras_left_out, load_views, training_cameras
 
 SHADOW_SUFFIX = ".shadow.safetensors"  # a recorded vehicle's shadow layer, beside its actors/<id>.ply
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
@@ -542,6 +542,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": run.train_frames, "heldout_frames": run.heldout_frames,
                "extent_m": round(run.extent, 3), "cameras": sorted({v.camera_name for v in run.levels.views}),
+               **({"cameras_left_out": left_out} if (left_out := cameras_left_out(manifest)) else {}),
                "views": len(run.levels.views), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()},

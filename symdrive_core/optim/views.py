@@ -67,6 +67,18 @@ def training_cameras(manifest: Manifest) -> list:
     return [first] + [c for c in others if all(cf.image for cf in c.frames)]
 
 
+def cameras_left_out(manifest: Manifest) -> dict[str, str]:
+    """Why each camera :func:`training_cameras` leaves out does not train, by name (said in the
+    reconstruction's metrics, not dropped silently)."""
+    out = {}
+    for c in manifest.cameras[1:]:
+        missing = [i for i, cf in enumerate(c.frames) if not cf.image]
+        if missing:
+            out[c.name] = ("no images" if len(missing) == len(c.frames)
+                           else f"no image at frame {missing[0]} ({len(missing)} of {len(c.frames)} frames)")
+    return out
+
+
 def load_views(manifest: Manifest, frames: list[int], camera: str | None = None, depth: bool = True) -> list[View]:
     """The recorded views of ``frames``, frame by frame: of ``camera``, else of every camera that
     recorded images (:func:`training_cameras`; each must have an image at each frame)."""

@@ -12,7 +12,7 @@ from symdrive_core import conventions
 from symdrive_core.eval.views import evaluate_heldout
 from symdrive_core.io.images import write_image
 from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
-from symdrive_core.optim.views import load_views, training_cameras
+from symdrive_core.optim.views import cameras_left_out, load_views, training_cameras
 from symdrive_core.scene import Camera, CameraFrame, load_manifest
 from symdrive_core.scene.camera import CameraView
 from symdrive_core.scene.ground_truth import split_frames
@@ -67,6 +67,7 @@ def test_every_camera_that_recorded_images_trains(tmp_path):
     m = add_camera(root, "gappy", -1.0)
     m.camera("gappy").frames[3].image = None  # a camera that missed a frame
     assert [c.name for c in training_cameras(m)] == ["front", "right"]
+    assert cameras_left_out(m) == {"virtual": "no images", "gappy": "no image at frame 3 (1 of 16 frames)"}
     train = split_frames(m)[0][:3]
     views = load_views(m, train)
     assert [(v.frame, v.camera_name) for v in views] == [(f, c) for f in train for c in ("front", "right")]
