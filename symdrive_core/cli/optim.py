@@ -49,6 +49,10 @@ def add_commands(sub) -> None:
                    help="each view's render through a learnt affine colour transform before the loss: one per camera "
                         "but the first ('camera'), one per view ('frame'), or none "
                         f"(default {default_of(ReconstructConfig, 'exposure')})")
+    p.add_argument("--sky-skyline", action=argparse.BooleanOptionalAction, default=None,
+                   help="in views without depth (SfM-only drives), start the sky dome above the horizon and the "
+                        "skyline the point cloud draws in each view; off: only where a dense depth map marks the sky "
+                        f" (default {'on' if ReconstructConfig().sky.skyline else 'off'})")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
     p.add_argument("--densify-until", type=unit_fraction, metavar="F",
@@ -87,6 +91,7 @@ def _reconstruct(args) -> int:
                                     densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
+    cfg.sky = replace(cfg.sky, **given(args, skyline="sky_skyline"))
     if args.static:
         cfg.decompose = False
     if args.lateral:  # checked before hours of fitting, not after

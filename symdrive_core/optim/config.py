@@ -35,6 +35,19 @@ class PoseRefineConfig:
 
 
 @dataclass
+class SkyConfig:
+    """Where the sky dome starts in a view without depth (:mod:`.sky`)."""
+
+    # The sky estimated above the horizon and the point cloud's skyline; off: no dome where no
+    # depth marks the sky (sparse sensor depth never gets one: its scanner sees no building's top).
+    skyline: bool = True
+    min_elevation_deg: float = 1.0  # a sky ray is at least this far above the horizon
+    cell_px: int = 8  # the skyline's resolution in pixels, both ways
+    neighbour_cells: int = 1  # a column's skyline is the highest over this many columns each side
+    margin_cells: int = 0  # the sky starts this many cells above the skyline
+
+
+@dataclass
 class ReconstructConfig:
     iters: int = 3000
     # Coarse to fine: fractions of ``iters`` at each of which the training images' downscale
@@ -57,7 +70,8 @@ class ReconstructConfig:
     depth_weight: float | None = None
     sensor_depth_weight: float = 1.0  # the largest measured weight that kept held-out PSNR (docs/results.md)
     init_opacity: float = 0.3
-    sky_points: int = 4000
+    sky_points: int = 4000  # the sky dome's Gaussians at the start
+    sky: SkyConfig = field(default_factory=SkyConfig)
     max_init_points: int = 30000  # random subset of the point cloud (CPU time grows with the count)
     densify_from: int = 300
     densify_until_fraction: float = 0.6

@@ -30,16 +30,17 @@ from ..io.atomic import atomic_path, write_text_atomic
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
-from ..scene.depth import is_sky, measured
+from ..scene.depth import measured
 from ..scene.ground_truth import split_frames
 from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
 from . import decompose, pose_refine
-from .config import DensifyConfig, ReconstructConfig
+from .config import DensifyConfig, ReconstructConfig, SkyConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .exposure import Exposure
 from .losses import photometric
 from .recorded_shadows import RecordedShadows
+from .sky import sky_mask
 from .views import Levels, View, cameras_left_out, load_views, training_cameras
 
 SHADOW_SUFFIX = ".shadow.safetensors"  # a recorded vehicle's shadow layer, beside its actors/<id>.ply
@@ -68,20 +69,22 @@ def scene_extent(views: list[View]) -> tuple[float, torch.Tensor]:
     return max(1.1 * float((centres - centre).norm(dim=1).max()), 1.0), centre
 
 
-def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generator):
-    """Points on a sphere of ``radius`` around each camera, along the pixels its depth calls sky
-    (never the unmeasured pixels of sparse depth)."""
+def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generator, cloud: np.ndarray | None = None,
+               est: SkyConfig | None = None):
+    """Points on a sphere of ``radius`` around each camera, along the pixels of its sky
+    (:func:`.sky.sky_mask`: its depth's where that is dense, none where it is sparse, else above
+    the horizon and the skyline of ``cloud``)."""
     pts, cols = [], []
     for v in views:
-        if v.depth is None:
-            continue
-        ys, xs = np.nonzero(is_sky(v.depth.numpy()))
+        K = v.K.numpy().astype(np.float64)
+        viewmat = v.viewmat.numpy().astype(np.float64)
+        depth = None if v.depth is None else v.depth.numpy()
+        ys, xs = np.nonzero(sky_mask(depth, K, viewmat, v.width, v.height, cloud, est or SkyConfig()))
         if len(ys) == 0:
             continue
-        K = v.K.numpy().astype(np.float64)
         rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-        c2w = np.linalg.inv(v.viewmat.numpy().astype(np.float64))
+        c2w = np.linalg.inv(viewmat)
         pts.append(radius * rays @ c2w[:3, :3].T + c2w[:3, 3])
         cols.append(v.image.numpy()[ys, xs])
     if not pts:
@@ -119,7 +122,7 @@ def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructCon
         pts, cols = pts[keep], cols[keep]
     extent, _ = scene_extent(views)
     far = max(SKY_DISTANCE_FACTOR * extent, 150.0)
-    sp, sc = sky_points(views, cfg.sky_points, far, rng)
+    sp, sc = sky_points(views, cfg.sky_points, far, rng, pts if cfg.sky.skyline else None, cfg.sky)
     pts, cols = np.concatenate([pts, sp]), np.concatenate([cols, sc])
     n = len(pts)
     scale = knn_scale(pts)

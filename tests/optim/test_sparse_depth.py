@@ -9,6 +9,7 @@ import torch
 
 from symdrive_core.eval.views import evaluate_heldout
 from symdrive_core.io.images import read_image, write_image
+from symdrive_core.io.points import read_points
 from symdrive_core.optim.reconstruct import ReconstructConfig, depth_loss, load_views, reconstruct, sky_points
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.ground_truth import split_frames
@@ -40,6 +41,8 @@ def test_gaps_in_sparse_depth_seed_no_sky(sparse_package):
     assert gaps > 0.9 * sum(v.width * v.height for v in views)
     pts, _ = sky_points(views, 1000, 100.0, np.random.default_rng(0))
     assert len(pts) == 0
+    cloud = read_points(m.resolve(m.background_points))[0]  # sparse sensor depth: no skyline estimate either
+    assert len(sky_points(views, 1000, 100.0, np.random.default_rng(0), cloud)[0]) == 0
     m.cameras[0].depth_zero = "sky"  # the same files read the way dense maps are: gaps become sky
     pts, _ = sky_points(load_views(m, split_frames(m)[0]), 1000, 100.0, np.random.default_rng(0))
     assert len(pts) == 1000
