@@ -34,8 +34,13 @@ def _describe_mode(mode: int) -> str:
     return "not a regular file"
 
 
+LFS_POINTER = b"version https://git-lfs.github.com/spec/"  # how a Git LFS pointer file begins
+LFS_POINTER_BYTES_MAX = 1024  # a pointer is three short lines
+
+
 def check_regular(path, field: str | None = None) -> os.stat_result:
-    """``os.stat(path)`` of a regular file (symlinks followed), else :class:`InputError`."""
+    """``os.stat(path)`` of a regular file (symlinks followed) that is not a Git LFS pointer, else
+    :class:`InputError`."""
     try:
         st = os.stat(path)
     except (OSError, ValueError) as exc:
@@ -43,6 +48,9 @@ def check_regular(path, field: str | None = None) -> os.stat_result:
                          else f"cannot open: {getattr(exc, 'strerror', None) or exc}", field) from None
     if not stat.S_ISREG(st.st_mode):
         raise InputError(path, f"is {_describe_mode(st.st_mode)}, not a regular file", field)
+    if st.st_size <= LFS_POINTER_BYTES_MAX:
+        with open_regular(path, field):  # checks the head
+            pass
     return st
 
 
@@ -56,11 +64,17 @@ def open_regular(path, field: str | None = None):
         raise InputError(path, "file not found" if isinstance(exc, FileNotFoundError)
                          else f"cannot open: {getattr(exc, 'strerror', None) or exc}", field) from None
     try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            raise InputError(path, f"is {_describe_mode(mode)}, not a regular file", field)
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise InputError(path, f"is {_describe_mode(st.st_mode)}, not a regular file", field)
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
+        if st.st_size <= LFS_POINTER_BYTES_MAX:
+            head = os.read(fd, len(LFS_POINTER))
+            if head == LFS_POINTER:
+                raise InputError(path, "is a Git LFS pointer, not the file's content (fetch it with `git lfs pull`)",
+                                 field)
+            os.lseek(fd, 0, os.SEEK_SET)
         return os.fdopen(fd, "rb")
     except BaseException:
         os.close(fd)

@@ -1,6 +1,7 @@
 """Reads stay inside the package unless asked: paths that climb out, absolute paths and symlinks
 out are refused naming the field (and pass with ``allow_external``); only regular files are
-opened (a FIFO or /dev/zero fails at once); PLY headers are bounded before allocation."""
+opened (a FIFO or /dev/zero fails at once), and a Git LFS pointer is named as one; PLY headers
+are bounded before allocation."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from symdrive_core.errors import InputError
@@ -183,3 +185,26 @@ def test_output_folder_linked_out_of_the_package_is_refused(make_package, tmp_pa
     (manifest.parent / "output").symlink_to(tmp_path / "elsewhere", target_is_directory=True)
     with pytest.raises(InputError, match=r"manifest\.json: output: .*leads outside the package"):
         m.output_dir()
+
+
+LFS_TEXT = ("version https://git-lfs.github.com/spec/v1\n"
+            "oid sha256:c105962f886cf2c4c3ecc147ae7d495458abd84ab8c16b04b3d793b548ff3d36\nsize 1936240\n")
+
+
+def test_a_git_lfs_pointer_is_named_as_one_by_every_reader(make_package, tmp_path):
+    from symdrive_core.importers.lidar import read_scan
+    from symdrive_core.io.images import read_image, write_image
+
+    manifest = make_package()
+    (manifest.parent / "x.ply").write_text(LFS_TEXT)
+    _set_background(manifest, "x.ply")
+    r = _cli("validate", manifest, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "background.splats" in r.stderr and "Git LFS pointer" in r.stderr and "git lfs pull" in r.stderr, r.stderr
+    for name, read in (("a.png", read_image), ("s.bin", read_scan), ("b.ply", read_splats)):
+        path = tmp_path / name
+        path.write_text(LFS_TEXT)
+        with pytest.raises(InputError, match=f"{name}: .*is a Git LFS pointer"):
+            read(path)
+    small = write_image(tmp_path / "small.png", np.full((2, 3, 3), 0.5, np.float32))  # a real file this short
+    assert small.stat().st_size < 1024 and read_image(small).shape == (2, 3, 3)
