@@ -181,6 +181,14 @@ def add_frames_option(p: argparse.ArgumentParser, flag: str = "--frames", *, hel
     p.add_argument(flag, type=frames_arg, metavar="LIST", help=f"{help}; LIST as 0:3,7 (ranges inclusive)")
 
 
+def names_arg(text: str) -> tuple[str, ...]:
+    """A list of names (cameras, channels): distinct and comma-separated."""
+    names = tuple(t.strip() for t in text.split(","))
+    if not all(names) or len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"expected distinct names separated by commas, got {text!r}")
+    return names
+
+
 def distances_arg(text: str) -> list[float]:
     """``--offsets`` of every command: comma-separated positive distances in metres."""
     try:

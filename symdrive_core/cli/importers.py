@@ -16,7 +16,7 @@ from ..importers.kitti_calib import CAMERAS as KITTI_CAMERAS
 from ..importers.kitti_raw import KittiRawConfig
 from ..importers.nuscenes import NuScenesConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
-from . import add_quiet_option, count_int, default_of, frames_arg, positive_int
+from . import add_quiet_option, count_int, default_of, frames_arg, names_arg, positive_int
 
 
 def _common(p, images: bool, camera_name: bool = True) -> None:
@@ -154,19 +154,11 @@ def _nuscenes_command(isub) -> None:
     p.add_argument("dataroot", metavar="DATAROOT", help="the folder holding VERSION/ (scene.json, ...) and samples/")
     p.add_argument("--version", help=f"the tables' folder under DATAROOT (default {NuScenesConfig.version})")
     p.add_argument("--scene", required=True, help="the scene's name (scene-0061)")
-    p.add_argument("--cameras", type=_channel_list, metavar="CAM,...",
+    p.add_argument("--cameras", type=names_arg, metavar="CAM,...",
                    help="channels imported as package cameras, the first the package's first "
                         f"(default {','.join(NuScenesConfig.cameras)})")
     _common(p, images=False, camera_name=False)
     p.set_defaults(func=_nuscenes)
-
-
-def _channel_list(text: str) -> tuple[str, ...]:
-    channels = tuple(t.strip() for t in text.split(","))
-    if not all(channels) or len(set(channels)) != len(channels):
-        raise argparse.ArgumentTypeError(f"expected distinct channels separated by commas (CAM_FRONT,CAM_BACK), "
-                                         f"got {text!r}")
-    return channels
 
 
 def _tracks_command(isub) -> None:

@@ -16,6 +16,7 @@ from . import (
     add_quiet_option,
     default_of,
     given,
+    names_arg,
     positive_int,
 )
 
@@ -101,10 +102,13 @@ def add_commands(sub) -> None:
 
 
 def _add_window_options(p) -> None:
-    """``--frames`` and ``--offsets`` of ``plan`` and ``run``: the same window for both."""
+    """``--frames``, ``--offsets`` and ``--cameras`` of ``plan`` and ``run``: the same window for both."""
     add_frames_option(p, help="the frame window: render, restore and harmonize only these recorded frames "
                               "(default: all; reconstruction fits every frame)")
     add_offsets_option(p, help="lateral views to restore instead of the manifest's effects.lateral_offsets")
+    p.add_argument("--cameras", type=names_arg, metavar="NAME,...",
+                   help="render, restore and harmonize only these cameras (default: all; reconstruction fits every "
+                        "camera that recorded images)")
 
 
 def _plan_options(args):
@@ -113,7 +117,7 @@ def _plan_options(args):
     from ..pipeline.plan import PlanOptions
 
     return PlanOptions(refine=not args.no_refine, adapt=not args.no_adapt, frames=args.frames,
-                       offsets=None if args.offsets is None else tuple(both_sides(args.offsets)))
+                       offsets=None if args.offsets is None else tuple(both_sides(args.offsets)), cameras=args.cameras)
 
 
 def _plan(args) -> int:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from .plan import PlanOptions
+from .plan import PlanOptions, run_cameras
 from .run import run_scene
 
 
@@ -63,10 +63,10 @@ def run_batch(packages: list[str], out_root: str | Path, *, executor: str = "loc
             manifest = load_manifest(package, allow_external=allow_external)
             check_files(manifest)
             open_output(manifest, OutputTree(out), options or PlanOptions(), StageOptions(), device, force)
-            for cam in manifest.cameras:
-                frames = list(range(len(cam.frames)))
+            for name in run_cameras(manifest, (options or PlanOptions()).cameras):
+                frames = list(range(len(manifest.camera(name).frames)))
                 for i in range(0, len(frames), frames_per_task):
-                    chunks.append(render_task.remote(str(package), str(out), cam.name, frames[i:i + frames_per_task],
+                    chunks.append(render_task.remote(str(package), str(out), name, frames[i:i + frames_per_task],
                                                      device, allow_external))
         ray.get(chunks)
         return ray.get([finish_task.remote(str(p), str(o), progress=False, lock=False, **run)

@@ -56,6 +56,9 @@ class PlanOptions:
     # Signed lateral offsets to restore instead of the manifest's ``effects.lateral_offsets``
     # (``conventions.both_sides`` turns a command line's distances into these).
     offsets: tuple[float, ...] | None = None
+    # The cameras rendered, restored and harmonized, by name (None: every camera). The
+    # reconstruction still fits every camera that recorded images.
+    cameras: tuple[str, ...] | None = None
 
 
 @dataclass
@@ -210,6 +213,20 @@ def _window(manifest: Manifest, frames: list[int] | None) -> list[int] | None:
     return sorted({int(f) for f in frames})
 
 
+def run_cameras(manifest: Manifest, names: tuple[str, ...] | None) -> list[str]:
+    """``PlanOptions.cameras`` in the package's order, each a camera of the package (else exit 2
+    naming it); every camera when None."""
+    known = [c.name for c in manifest.cameras]
+    if names is None:
+        return known
+    bad = [n for n in names if n not in known]
+    if bad or not names:
+        what = (f"camera {bad[0]!r} is not in the package ({', '.join(known)})" if bad
+                else "the list of cameras is empty")
+        raise ManifestError(manifest.path or manifest.root, what, "cameras")
+    return [n for n in known if n in names]
+
+
 def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: bool) -> StageDecision:
     """Fine-tune the restorer on this drive's own pairs when its weights record another drive."""
     from ..diffusion.adapt import drive_identity, shipped_weights, trained_drive
@@ -274,9 +291,11 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     visible, culled = _visibility(manifest, opt.near)
     window = _window(manifest, opt.frames)
     in_window = frames_all if window is None else window
+    cameras = run_cameras(manifest, opt.cameras)
 
-    # The decisions below see only the window's frames; plan.visible keeps every frame.
-    shown = {cam: {fi: ids for fi, ids in frames.items() if fi in in_window} for cam, frames in visible.items()}
+    # The decisions below see only the window's frames of the cameras run; plan.visible keeps every frame.
+    shown = {cam: {fi: ids for fi, ids in frames.items() if fi in in_window} for cam, frames in visible.items()
+             if cam in cameras}
     stages.append(StageDecision("render", True, "always" if window is None else "the frame window", in_window,
                                 sorted({a for cam in shown.values() for ids in cam.values() for a in ids})))
     stages.append(_cast_shadow(manifest, shown, (stages[0].actors or []) if stages[0].run else []))
@@ -337,7 +356,7 @@ def make_plan(manifest: Manifest, options: PlanOptions | None = None, previous: 
     stages.append(StageDecision("evaluate", has_gt and opt.evaluate, what if has_gt and opt.evaluate
                                 else ("evaluation disabled" if has_gt else "no ground truth")))
 
-    plan = Plan(manifest.name, len(manifest.frames), [c.name for c in manifest.cameras], stages,
+    plan = Plan(manifest.name, len(manifest.frames), cameras, stages,
                 visible, culled, degrees, key or inputs_key(manifest, opt), window=window)
     if previous and previous.get("inputs_hash") == plan.inputs_hash:
         # A stage is reused only if every running stage after it is too: later stages take

@@ -47,7 +47,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
     tree = OutputTree(Path(out_dir) if out_dir is not None else manifest.output_dir())
     with OutputLock(tree.root) if lock else contextlib.nullcontext():
         state, plan = open_output(manifest, tree, options, stage_options, device, force)
-        report = Report(manifest.name, device)
+        report = Report(manifest.name, device, extra={"cameras": plan.cameras})
         ctx = RunContext(manifest, plan, tree, state, device, progress, stage_options, Shared())
         for decision in plan.stages:
             name = decision.name

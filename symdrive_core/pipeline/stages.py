@@ -93,6 +93,11 @@ class Shared:
     restored: list = field(default_factory=list)  # RestoredView, for refinement
 
 
+def planned_cameras(ctx) -> list:
+    """The package cameras this run renders, restores and harmonizes (``PlanOptions.cameras``)."""
+    return [ctx.manifest.camera(name) for name in ctx.plan.cameras]
+
+
 def background_path(ctx) -> Path | None:
     """The background splat PLY: the package's, or the one this run's reconstruct stage wrote."""
     if ctx.shared.background_path is not None:
@@ -219,7 +224,7 @@ def render_stage(ctx) -> StageResult:
     """Every camera's every frame (frames already on disk are kept)."""
     from .scene_render import render_frames
 
-    jobs = [(cam.name, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("render").frames]
+    jobs = [(cam.name, fi) for cam in planned_cameras(ctx) for fi in ctx.plan.stage("render").frames]
     fitted = background(ctx) if ctx.shared.background_path is not None else None
     done = render_frames(ctx.manifest, ctx.plan, ctx.tree, jobs, ctx.device, ctx.progress, background=fitted,
                          actors=ctx.shared.actors, shadows=recorded_shadows(ctx))
@@ -243,7 +248,7 @@ def inpaint_stage(ctx) -> StageResult:
                              background_gaussians=background(ctx), actor_gaussians=recorded_vehicles(ctx),
                              actor_shadows=recorded_shadows(ctx))
     inpaint = _harmonizer(ctx, cfg.harmonize)
-    jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("inpaint").frames]
+    jobs = [(cam, fi) for cam in planned_cameras(ctx) for fi in ctx.plan.stage("inpaint").frames]
     pixels, n = 0, 0
     for cam, fi in tqdm(jobs, desc="inpaint", unit="frame", disable=not ctx.progress):
         path = ctx.tree.frame("inpaint", cam.name, fi)
@@ -306,7 +311,10 @@ def restore_stage(ctx) -> StageResult:
     chains: dict = {}  # one chain per (camera, frame): offsets share its prefix
     metrics, scored, unscored = {}, None, {}
     if ctx.plan.runs("evaluate") and has_lateral_truth(m):
-        scored, why = scorable_lateral_truth(m, offsets, scored_frames)
+        if truth_camera(m).name in ctx.plan.cameras:
+            scored, why = scorable_lateral_truth(m, offsets, scored_frames)
+        else:
+            why = f"the lateral truth's camera {truth_camera(m).name!r} is not among the cameras run"
         unscored = {"lateral_not_scored": why} if why else {}
     if scored is not None:
         methods = tuple(dict.fromkeys((*opts.eval_methods, default)))
@@ -320,7 +328,7 @@ def restore_stage(ctx) -> StageResult:
         for v in ctx.shared.restored:
             write_image(ctx.tree.frame("restore", f"{cam_name}/{v.offset_m:+g}", v.frame), v.image)
             done.add((cam_name, v.frame, round(v.offset_m, 6)))
-    jobs = [(cam, fi, off) for cam in m.cameras for fi in decision.frames
+    jobs = [(cam, fi, off) for cam in planned_cameras(ctx) for fi in decision.frames
             for off in offsets if (cam.name, fi, round(off, 6)) not in done]
     for cam, fi, off in tqdm(jobs, desc="restore", unit="view", disable=not ctx.progress or not jobs):
         path = ctx.tree.frame("restore", f"{cam.name}/{off:+g}", fi)
@@ -414,7 +422,7 @@ def harmonize_stage(ctx) -> StageResult:
     from ..io.images import read_image, write_image, write_mask
 
     harmonizer = _harmonizer(ctx)
-    jobs = [(cam, fi) for cam in ctx.manifest.cameras for fi in ctx.plan.stage("harmonize").frames]
+    jobs = [(cam, fi) for cam in planned_cameras(ctx) for fi in ctx.plan.stage("harmonize").frames]
     n = 0
     for cam, fi in tqdm(jobs, desc="harmonize", unit="frame", disable=not ctx.progress):
         path = ctx.tree.frame("harmonize", cam.name, fi)
@@ -452,7 +460,7 @@ def finetune_stage(ctx) -> StageResult:
         actor = ctx.manifest.actor(aid)
         vehicle = actor_splats(ctx.manifest, actor, ctx.tree.folder(ASSET_CACHE))
         samples = []
-        for cam in ctx.manifest.cameras:
+        for cam in planned_cameras(ctx):
             for fi in ctx.plan.stage("harmonize").frames:
                 target_path = ctx.tree.frame("harmonize", cam.name, fi)
                 if aid not in ctx.plan.visible[cam.name][fi] or not target_path.exists():

@@ -93,15 +93,21 @@ def test_the_second_camera_is_seen_better_by_the_fit_that_trained_on_it(rig):
     assert right_both > right_one + 1.0
 
 
-def test_a_run_renders_restores_and_refines_every_camera(rig, tmp_path):
-    """(The restorer's adaptation, the run's slowest default stage, is tested on one camera.)"""
-    from symdrive_core.cli import main
-
+def _with_reconstruction(rig):
+    """The rig's package pointing at its two-camera reconstruction, restoring views 1 m aside."""
     m, both, _ = rig
     m.background_splats = (both.output / "background.ply").relative_to(m.root).as_posix()
     m.actor("car_1").splats = (both.output / "actors" / "car_1.ply").relative_to(m.root).as_posix()
     m.effects.lateral_offsets = [1.0]
     m.save()
+    return m
+
+
+def test_a_run_renders_restores_and_refines_every_camera(rig, tmp_path):
+    """(The restorer's adaptation, the run's slowest default stage, is tested on one camera.)"""
+    from symdrive_core.cli import main
+
+    m = _with_reconstruction(rig)
     out = tmp_path / "out"
     assert main(["run", str(m.root), "--out", str(out), "--quiet", "--frames", "2,6", "--no-adapt"]) == 0
     stages = {s["name"]: s for s in json.loads((out / "report.json").read_text())["stages"]}
@@ -109,3 +115,20 @@ def test_a_run_renders_restores_and_refines_every_camera(rig, tmp_path):
     for cam in ("front", "right"):
         assert sorted(p.name for p in (out / "render" / cam).glob("*.png")) == ["000002.png", "000006.png"]
         assert sorted(p.name for p in (out / "restore" / cam / "+1").glob("*.png")) == ["000002.png", "000006.png"]
+
+
+def test_a_run_keeps_to_the_cameras_named(rig, tmp_path, capsys):
+    from symdrive_core.cli import main
+
+    m = _with_reconstruction(rig)
+    out = tmp_path / "out"
+    assert main(["run", str(m.root), "--out", str(out), "--quiet", "--frames", "2", "--no-adapt", "--no-refine",
+                 "--cameras", "right"]) == 0
+    assert sorted(p.relative_to(out).as_posix() for p in out.glob("re*/**/*.png")) == [
+        "render/right/000002.png", "restore/right/+1/000002.png"]  # the manifest's offsets are signed
+    report = json.loads((out / "report.json").read_text())
+    assert report["cameras"] == ["right"]
+    capsys.readouterr()
+    assert main(["plan", str(m.root), "--cameras", "right,rear"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cameras" in err and "'rear' is not in the package (front, right)" in err
