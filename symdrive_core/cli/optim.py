@@ -52,7 +52,7 @@ def add_commands(sub) -> None:
     p.add_argument("--sky-skyline", action=argparse.BooleanOptionalAction, default=None,
                    help="in views without depth (SfM-only drives), start the sky dome above the horizon and the "
                         "skyline the point cloud draws in each view; off: only where a dense depth map marks the sky "
-                        f" (default {'on' if ReconstructConfig().sky.skyline else 'off'})")
+                        f"(default {'on' if ReconstructConfig().sky.skyline else 'off'})")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
     p.add_argument("--densify-until", type=unit_fraction, metavar="F",
