@@ -19,6 +19,7 @@ from symdrive_core.bench.reconstruction import (
     format_summary,
     schedule_configs,
     summary,
+    training_pixels,
     write_outputs,
 )
 from symdrive_core.scene import load_manifest
@@ -47,7 +48,7 @@ def main() -> None:
     chosen = {n: SCHEDULES[n] for n in args.only} if args.only else None
     configs = schedule_configs(args.iters, chosen)
     rows = curves(manifest, configs, args.every, progress=not args.quiet)
-    s = summary(rows, default_name(configs))
+    s = summary(rows, default_name(configs, training_pixels(manifest)))
     s["package"], s["commit"] = str(args.package), measured_at
     print(format_summary(s))
     paths = write_outputs(rows, s, configs, args.out, f"{manifest.name}, commit {s['commit']}")

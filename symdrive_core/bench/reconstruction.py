@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import atomic_path, write_text_atomic
-from ..optim.config import ReconstructConfig
+from ..optim.config import COARSE_TO_FINE, ReconstructConfig
 
 # Schedules measured against each other (overrides of ReconstructConfig); whichever equals the
-# config's defaults is the default.
+# config's defaults as they resolve for the package's images is the default.
 SCHEDULES = {
     "full resolution": {"resolution_schedule": ()},
-    "coarse to fine": {"resolution_schedule": (0.1, 0.3)},
+    "coarse to fine": {"resolution_schedule": COARSE_TO_FINE},
 }
 
 
@@ -33,9 +33,24 @@ def schedule_configs(iters: int | None = None, schedules: dict[str, dict] | None
     return {name: replace(base, **over) for name, over in (schedules or SCHEDULES).items()}
 
 
-def default_name(configs: dict[str, ReconstructConfig]) -> str:
-    """The schedule whose config is the defaults (at its iteration count); else the first."""
-    return next((n for n, c in configs.items() if c == ReconstructConfig(iters=c.iters)), next(iter(configs)))
+def training_pixels(manifest) -> int:
+    """The pixels of the package's largest training image (what the default schedule depends on)."""
+    from ..optim.views import training_cameras
+
+    return max(c.width * c.height for c in training_cameras(manifest))
+
+
+def default_config(iters: int, pixels: int) -> ReconstructConfig:
+    """The defaults at ``iters`` iterations, their resolution schedule as it resolves for images
+    of ``pixels`` pixels."""
+    d = ReconstructConfig(iters=iters)
+    return replace(d, resolution_schedule=d.schedule_for(pixels))
+
+
+def default_name(configs: dict[str, ReconstructConfig], pixels: int) -> str:
+    """The schedule whose config is the defaults for images of ``pixels`` pixels (at its iteration
+    count); else the first."""
+    return next((n for n, c in configs.items() if c == default_config(c.iters, pixels)), next(iter(configs)))
 
 
 def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress: bool = True) -> list[dict]:
@@ -150,7 +165,8 @@ def reconstruction_settings(manifest, iters: int) -> list:
     from ..optim.reconstruct import Fit
     from .accuracy_time import Setting
 
-    default, base = ReconstructConfig(), ReconstructConfig(iters=iters)
+    pixels = training_pixels(manifest)
+    default, base = default_config(ReconstructConfig().iters, pixels), default_config(iters, pixels)
     done: dict[str, dict] = {}
 
     def measure(cfg: ReconstructConfig):

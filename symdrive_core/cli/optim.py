@@ -7,15 +7,17 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from ..optim.config import ReconstructConfig
+from ..optim.config import COARSE_TO_FINE, ReconstructConfig
 from . import add_quiet_option, count_int, default_of, given, positive_int, unit_fraction
 
 
-def resolution_schedule_arg(text: str) -> tuple[float, ...]:
+def resolution_schedule_arg(text: str) -> tuple[float, ...] | None:
     """``--resolution-schedule``: increasing fractions of the iterations, comma-separated; ``full``
-    (or nothing) trains at full resolution throughout."""
+    (or nothing) trains at full resolution throughout; ``auto`` (None) lets the image size choose."""
     if text.strip().lower() in ("", "full"):
         return ()
+    if text.strip().lower() == "auto":
+        return None
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
@@ -40,8 +42,9 @@ def add_commands(sub) -> None:
     p.add_argument("--resolution-schedule", type=resolution_schedule_arg, metavar="F,...",
                    help="coarse to fine: the fractions of the iterations at which the training images' downscale "
                         "halves, e.g. 0.1,0.3 trains at 1/4 resolution until 10 %%, 1/2 until 30 %%, full after; "
-                        "'full': full resolution throughout (default "
-                        f"{','.join(map(str, ReconstructConfig().resolution_schedule)) or 'full'})")
+                        "'full': full resolution throughout; 'auto' (the default): "
+                        f"{','.join(map(str, COARSE_TO_FINE))} for images of at least "
+                        f"{default_of(ReconstructConfig, 'coarse_to_fine_pixels')} pixels, full below")
     p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
                    f"0 = off (default {default_of(ReconstructConfig, 'sensor_depth_weight')} where the depth is LiDAR's, "
                    "sparse, as `import lidar` writes it; else 0)")

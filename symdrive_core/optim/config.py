@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+COARSE_TO_FINE = (0.1, 0.3)  # 1/4 resolution until 10 % of the iterations, 1/2 until 30 %, full after
+
 
 @dataclass
 class DensifyConfig:
@@ -53,7 +55,11 @@ class ReconstructConfig:
     # Coarse to fine: fractions of ``iters`` at each of which the training images' downscale
     # halves, e.g. (0.1, 0.3): 4x until 10 %, 2x until 30 %, full resolution after; () = full
     # resolution throughout. Early iterations place and colour Gaussians, which needs no fine detail.
-    resolution_schedule: tuple[float, ...] = ()
+    # None: COARSE_TO_FINE for images of at least ``coarse_to_fine_pixels`` pixels, else full
+    # resolution (measured at 3000 iterations: ahead on two real drives of 113k and 117k pixels,
+    # behind on a 37k-pixel Cycles street; docs/results.md).
+    resolution_schedule: tuple[float, ...] | None = None
+    coarse_to_fine_pixels: int = 100_000
     sh_degree: int = 1
     sh_every: int = 1000  # raise the active SH degree every this many iterations
     lr_means: float = 1.6e-4  # times the scene extent; decays exponentially to lr_means_final
@@ -94,8 +100,17 @@ class ReconstructConfig:
     exposure: str = "camera"
     lr_exposure: float = 1e-3
 
+    def schedule_for(self, pixels: int) -> tuple[float, ...]:
+        """The resolution schedule a fit of images of ``pixels`` pixels (the largest) trains with."""
+        if self.resolution_schedule is not None:
+            return self.resolution_schedule
+        return COARSE_TO_FINE if pixels >= self.coarse_to_fine_pixels else ()
+
     def downscale_at(self, it: int) -> int:
-        """The factor the training images are downscaled by at iteration ``it`` (a power of 2)."""
+        """The factor the training images are downscaled by at iteration ``it`` (a power of 2),
+        once the schedule is set (:meth:`schedule_for`; the training loop sets it)."""
+        if self.resolution_schedule is None:
+            raise ValueError("downscale_at: the resolution schedule depends on the images; set it with schedule_for")
         return 2 ** sum(it < round(f * self.iters) for f in self.resolution_schedule)
 
     def sh_degree_at(self, it: int) -> int:

@@ -283,6 +283,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
     levels = views if isinstance(views, Levels) else Levels(views)
+    cfg = replace(cfg, resolution_schedule=cfg.schedule_for(max(v.width * v.height for v in levels.views)))
     n_views = len(levels.views)
     until = cfg.iters if until is None else min(until, cfg.iters)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)

@@ -35,11 +35,12 @@ def test_time_to_the_defaults_psnr_is_a_ratio_of_its_whole_time():
     assert "| b | 20 | 25.90 | 0.8000 | 8 | never |  |" in bench.format_summary(s)
 
 
-def test_the_default_schedule_is_the_one_equal_to_the_config():
+def test_the_default_schedule_is_the_one_the_config_resolves_to_for_the_images():
     configs = bench.schedule_configs(40)
     assert all(c.iters == 40 for c in configs.values())
-    default = bench.default_name(configs)
-    assert configs[default].resolution_schedule == ReconstructConfig().resolution_schedule
+    big = ReconstructConfig().coarse_to_fine_pixels
+    assert bench.default_name(configs, big - 1) == "full resolution"
+    assert bench.default_name(configs, big) == "coarse to fine"
 
 
 def test_curves_score_each_schedule_every_k_iterations_and_write_the_figure(package, tmp_path):
@@ -50,7 +51,7 @@ def test_curves_score_each_schedule_every_k_iterations_and_write_the_figure(pack
         assert [r["iteration"] for r in mine] == [0, 20, 40]
         assert mine[0]["seconds"] == 0.0 < mine[1]["seconds"] < mine[2]["seconds"]
         assert mine[-1]["psnr"] > mine[0]["psnr"]
-    s = bench.summary(rows, bench.default_name(configs))
+    s = bench.summary(rows, bench.default_name(configs, bench.training_pixels(package)))
     paths = bench.write_outputs(rows, s, configs, tmp_path, "synthetic")
     assert json.loads(paths["json"].read_text())["configs"]["coarse to fine"]["resolution_schedule"] == [0.1, 0.3]
     assert paths["csv"].read_text().startswith("schedule,iteration,seconds,psnr,ssim,gaussians")

@@ -9,7 +9,7 @@ import torch
 
 from symdrive_core.cli.optim import resolution_schedule_arg
 from symdrive_core.optim import reconstruct as rec
-from symdrive_core.optim.config import ReconstructConfig
+from symdrive_core.optim.config import COARSE_TO_FINE, ReconstructConfig
 from symdrive_core.optim.views import Levels, View, block_depth, downscaled, held_pixels, load_views
 from symdrive_core.scene import load_manifest
 from symdrive_core.splat.render import params_from_gaussians, render_params
@@ -20,7 +20,19 @@ from .conftest import H, W
 def test_downscale_halves_at_each_fraction_of_the_iterations():
     cfg = ReconstructConfig(iters=1000, resolution_schedule=(0.1, 0.3))
     assert [cfg.downscale_at(it) for it in (0, 99, 100, 299, 300, 999)] == [4, 4, 2, 2, 1, 1]
-    assert {ReconstructConfig(iters=1000).downscale_at(it) for it in (0, 500)} == {1}  # the default: full throughout
+    assert {ReconstructConfig(iters=1000, resolution_schedule=()).downscale_at(it) for it in (0, 500)} == {1}
+    with pytest.raises(ValueError, match="schedule_for"):
+        ReconstructConfig().downscale_at(0)  # the default depends on the images
+
+
+def test_the_default_schedule_is_coarse_to_fine_for_large_images_only():
+    cfg = ReconstructConfig()
+    assert cfg.resolution_schedule is None
+    assert cfg.schedule_for(cfg.coarse_to_fine_pixels) == COARSE_TO_FINE == (0.1, 0.3)
+    assert cfg.schedule_for(cfg.coarse_to_fine_pixels - 1) == ()
+    assert cfg.schedule_for(256 * 144) == () and cfg.schedule_for(613 * 185) == COARSE_TO_FINE  # as measured
+    assert ReconstructConfig(resolution_schedule=()).schedule_for(10**7) == ()  # a schedule given stays
+    assert resolution_schedule_arg("auto") is None
 
 
 def test_sh_degree_rises_every_sh_every_iterations_up_to_the_degree():
@@ -145,3 +157,15 @@ def test_a_resumed_fit_continues_the_schedule_where_it_stopped(synthetic_package
     assert result.metrics["resumed_from"] == 30
     assert seen == _expected(cfg, 30) and seen[0] == (W // 2, 1)
     assert result.metrics["downscale"] == [{"iteration": 30, "factor": 2}, {"iteration": 40, "factor": 1}]
+
+
+def test_the_default_schedule_follows_the_images_size(synthetic_package, tmp_path):
+    root, _ = synthetic_package
+    m = load_manifest(root)
+    quick = dict(iters=40, densify_from=100, checkpoint_every=100, sky_points=0)
+    small = rec.reconstruct(m, tmp_path / "small", ReconstructConfig(**quick), progress=False)
+    assert small.metrics["downscale"] == [{"iteration": 0, "factor": 1}]  # 48x32: under the threshold
+    large = rec.reconstruct(m, tmp_path / "large", ReconstructConfig(**quick, coarse_to_fine_pixels=W * H),
+                            progress=False)
+    assert large.metrics["downscale"] == [{"iteration": 0, "factor": 4}, {"iteration": 4, "factor": 2},
+                                          {"iteration": 12, "factor": 1}]  # COARSE_TO_FINE of 40 iterations
