@@ -213,6 +213,14 @@ def pixel_centers(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     return np.meshgrid(u, v)
 
 
+def pixel_rays_camera(K: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Camera-frame rays [..., 3] through the centres of pixels (``xs``, ``ys``: integer column and
+    row indices, any matching shape), scaled so z = 1 (the ray parameter is then the z-depth)."""
+    pix = np.stack([np.asarray(xs, np.float64) + PIXEL_CENTER_OFFSET, np.asarray(ys, np.float64) + PIXEL_CENTER_OFFSET,
+                    np.ones(np.shape(xs))], -1)
+    return pix @ np.linalg.inv(np.asarray(K, dtype=np.float64)).T
+
+
 def project_points(points_world: np.ndarray, w2c: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World points [N,3] -> (pixel coordinates [N,2], camera depth z [N]) in this convention."""
     p = np.asarray(points_world, dtype=np.float64)

@@ -164,10 +164,8 @@ def _window_plane(c2ws, clouds) -> tuple[tuple[np.ndarray, float] | None, str, s
 def pixel_rays(K, c2w, width: int, height: int) -> np.ndarray:
     """World directions [H*W, 3] through every pixel centre, scaled so camera z = 1 (the ray
     parameter is then the z-depth)."""
-    u, v = np.meshgrid(np.arange(width) + conventions.PIXEL_CENTER_OFFSET,
-                       np.arange(height) + conventions.PIXEL_CENTER_OFFSET)
-    pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
-    cam = pix @ np.linalg.inv(np.asarray(K, dtype=np.float64)).T
+    xs, ys = np.meshgrid(np.arange(width), np.arange(height))
+    cam = conventions.pixel_rays_camera(K, xs.ravel(), ys.ravel())
     return cam @ np.asarray(c2w, dtype=np.float64)[:3, :3].T
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..conventions import pixel_rays_camera
 from ..optim.decompose import Track, tracks
 from ..scene import Manifest
 from ..scene.camera import CameraView
@@ -50,7 +51,7 @@ def unseen(manifest: Manifest, view: CameraView, depth: np.ndarray, region: np.n
     if len(ys) == 0:
         return out
     K, c2w = view.K, np.linalg.inv(view.world_to_camera)
-    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
+    rays = pixel_rays_camera(K, xs, ys)
     points = (rays * depth[ys, xs][:, None]) @ c2w[:3, :3].T + c2w[:3, 3]
     seen = np.zeros(len(points), bool)
     recorded = tracks(manifest)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..conventions import pixel_rays_camera
 from ..errors import InputError
 from ..gaussians import Gaussians, rgb_to_sh_dc
 from ..io.atomic import atomic_path, write_text_atomic
@@ -82,7 +83,7 @@ def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generato
         ys, xs = np.nonzero(sky_mask(depth, K, viewmat, v.width, v.height, cloud, est or SkyConfig()))
         if len(ys) == 0:
             continue
-        rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
+        rays = pixel_rays_camera(K, xs, ys)
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         c2w = np.linalg.inv(viewmat)
         pts.append(radius * rays @ c2w[:3, :3].T + c2w[:3, 3])

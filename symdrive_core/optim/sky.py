@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..conventions import WORLD_UP, invert_rigid
+from ..conventions import WORLD_UP, invert_rigid, pixel_rays_camera, project_points
 from ..scene.depth import is_sky
 from .config import SkyConfig
 
@@ -35,7 +35,7 @@ def sky_mask(depth: np.ndarray | None, K: np.ndarray, world_to_camera: np.ndarra
     if cloud is None or len(cloud) == 0:
         return np.zeros((height, width), bool)
     ys, xs = np.mgrid[0:height, 0:width]
-    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(xs.shape)], -1)
+    rays = pixel_rays_camera(K, xs, ys)
     c2w = invert_rigid(world_to_camera)
     up = rays @ (c2w[:3, :3].T @ WORLD_UP)  # the rays' world up component, unnormalised
     above = up > np.sin(np.radians(est.min_elevation_deg)) * np.linalg.norm(rays, axis=-1)
@@ -47,11 +47,9 @@ def _skyline(cloud: np.ndarray, K: np.ndarray, world_to_camera: np.ndarray, widt
     """[W] the first image row below the sky in each pixel column: the top of the highest cell a
     point lands on over the column's neighbourhood, less the margin (below the image where no
     point lands there)."""
-    cam = cloud @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
-    cam = cam[cam[:, 2] > NEAR_M]
-    u = K[0, 0] * cam[:, 0] / cam[:, 2] + K[0, 2]
-    v = K[1, 1] * cam[:, 1] / cam[:, 2] + K[1, 2]
-    inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    uv, z = project_points(cloud, world_to_camera, K)
+    u, v = uv[:, 0], uv[:, 1]
+    inside = (z > NEAR_M) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
     cells_x = -(-width // est.cell_px)
     top = np.full(cells_x, height // est.cell_px + 1)  # per cell column, the highest cell row with a point
     np.minimum.at(top, (u[inside] // est.cell_px).astype(int), (v[inside] // est.cell_px).astype(int))
