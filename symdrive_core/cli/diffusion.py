@@ -102,6 +102,9 @@ def add_commands(sub) -> None:
     p.add_argument("--warps", action="store_true",
                    help="also each frame's geometry-guided warp from the other frames (needs --cycle), "
                    "for training with --guide")
+    p.add_argument("--sensor", action="store_true",
+                   help="also pairs whose target a rig's second camera recorded at these frames (lateral "
+                   "truth imported with --lateral-truth; needs --cycle)")
     p.add_argument("--out", type=Path, required=True, help="pairs file to write (.safetensors)")
     add_quiet_option(p)
     add_external_assets_option(p)
@@ -265,11 +268,15 @@ def _make_pairs(args) -> int:
     if args.warps and not args.cycle:
         raise InputError("make-pairs", "needs --cycle: the cycle reconstructions' degraded starts fill what "
                          "no frame's warp sees", "--warps")
+    if args.sensor and not args.cycle:
+        raise InputError("make-pairs", "needs --cycle: every pair with a start needs the cycle reconstructions' "
+                         "degraded starts", "--sensor")
     manifest, ply = _reconstruction(args)
     cycle = cycle_config(CycleConfig(**given(args, iters="cycle_iters", max_gaussians="cycle_max_gaussians")))
     out = make_pairs(
         manifest, read_splats(ply, drop_invalid=True), args.offsets, args.out, frames=args.frames,
-        cycle_offsets=args.cycle, cycle_config=cycle, warps=args.warps, drive=drive_identity(manifest, ply),
+        cycle_offsets=args.cycle, cycle_config=cycle, warps=args.warps, sensor=args.sensor,
+        drive=drive_identity(manifest, ply),
         progress=not args.quiet,
     )
     print(f"wrote {out}")

@@ -59,6 +59,9 @@ def add_commands(sub) -> None:
     p.add_argument("--adapt-seconds", type=_seconds, metavar="S",
                    help="time budget of the adaptation, its pairs included "
                         f"(default {default_of(AdaptConfig, 'max_seconds')})")
+    p.add_argument("--no-sensor-pairs", dest="sensor_pairs", action="store_const", const=False,
+                   help="adapt on the synthetic pairs alone, even where a rig's second camera recorded the "
+                        "training frames (lateral truth imported with --lateral-truth)")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.add_argument("--max-memory", type=float, metavar="GiB",
@@ -141,7 +144,8 @@ def _run(args) -> int:
 
     stage_options = StageOptions()
     stage_options.sampler = replace(stage_options.sampler, **given(args, max_memory_gib="max_memory"))
-    stage_options.adapt = replace(stage_options.adapt, **given(args, iters="adapt_iters", max_seconds="adapt_seconds"))
+    adapt = given(args, "sensor_pairs", iters="adapt_iters", max_seconds="adapt_seconds")
+    stage_options.adapt = replace(stage_options.adapt, **adapt)
     report = run_scene(args.package, args.out, options=_plan_options(args),
                        device=args.device, progress=not args.quiet, force=args.force,
                        allow_external=args.allow_external_assets, stage_options=stage_options)

@@ -41,6 +41,8 @@ class AdaptConfig:
     degraded_fraction: float = 0.75  # as the shipped guided restorer was trained
     seed: int = 0
     threads: int = 1
+    # pairs whose target a rig's second camera recorded at the training frames (:mod:`.sensor_pairs`)
+    sensor_pairs: bool = True
     # every this many training frames one is left out of training, to fit the restorer's strength
     # on (:mod:`.strength`); fewer than two such groups of frames: no fit, the full strength
     validation_every: int = 8
@@ -60,13 +62,16 @@ def shipped_weights(guided: bool) -> Path:
 def drive_identity(manifest, reconstruction: str | Path) -> dict:
     """``{"scene", "identity"}``: the scene's name, and a hash of what training pairs are made from
     (the ground-truth camera's frames: size, intrinsics, poses, recorded image and depth bytes;
-    and the reconstruction's bytes). File names play no part: a copied package is the same drive."""
+    the images a rig's second camera recorded beside it; and the reconstruction's bytes). File
+    names play no part: a copied package is the same drive."""
     from ..scene.ground_truth import truth_camera
+    from .sensor_pairs import sensor_views
 
     cam = truth_camera(manifest)
     geometry = [cam.width, cam.height, [[cf.K.tolist(), cf.camera_to_world.tolist()] for cf in cam.frames]]
     h = hashlib.sha256(json.dumps(geometry).encode())
     paths = [manifest.resolve(rel) if rel else None for cf in cam.frames for rel in (cf.image, cf.depth)]
+    paths += [manifest.resolve(v.image) for v in sensor_views(manifest, cam.name, range(len(cam.frames)))]
     for path in [*paths, Path(reconstruction)]:
         if path is None or not path.is_file():
             h.update(b"\0missing")
@@ -124,7 +129,7 @@ def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: Ad
         make_pairs(manifest, gaussians, config.offsets, out / PAIRS, camera=truth_camera(manifest).name,
                    cycle_offsets=config.cycle_offsets,
                    cycle_config=cycle_config(CycleConfig(iters=config.cycle_iters)),
-                   warps=guided, drive=drive, progress=progress)
+                   warps=guided, sensor=config.sensor_pairs, drive=drive, progress=progress)
     left = None if config.max_seconds is None else max(config.max_seconds - (time.perf_counter() - t0), 0.0)
     held = validation_frames(pair_frames(out / PAIRS), config.validation_every)
     cfg = TrainConfig(steps=config.iters, lr=config.lr, warmup=config.warmup, seed=config.seed,

@@ -41,6 +41,7 @@ from ..io.images import read_image
 from ..scene import Manifest
 from ..scene.camera import CameraView
 from ..splat.render import SplatRenderer
+from .sensor_pairs import sensor_pairs, sensor_views
 
 
 def make_pairs(
@@ -54,13 +55,16 @@ def make_pairs(
     cycle_offsets=(),
     cycle_config=None,
     warps: bool = False,
+    sensor: bool = False,
     drive: dict | None = None,
     progress: bool = True,
 ) -> Path:
     """Write ``(I_-d, I_d) -> I_0`` for every recorded frame (default: the training frames) and d,
     and the degraded starts of one cycle reconstruction per ``cycle_offsets`` entry (fitted with
     ``cycle_config``, a :class:`~symdrive_core.optim.reconstruct.ReconstructConfig`; default
-    :func:`.cycle.cycle_config`); ``warps``: each frame's warp from the other frames (see above).
+    :func:`.cycle.cycle_config`); ``warps``: each frame's warp from the other frames (see above);
+    ``sensor``: also the pairs whose target a rig's second camera recorded at these frames
+    (:mod:`.sensor_pairs`; they need cycle offsets, as every pair with a start does).
     ``drive`` (:func:`.adapt.drive_identity`) is recorded, and passed on to weights trained on them."""
     from safetensors.numpy import save_file
     from tqdm import tqdm
@@ -75,6 +79,8 @@ def make_pairs(
         raise ValueError(f"make_pairs: cycle offsets must be non-zero metres, got {cycle_offsets}")
     if warps and not cycle_offsets:
         raise ValueError("make_pairs: warps need cycle offsets (their degraded starts fill what no frame saw)")
+    if sensor and not cycle_offsets:
+        raise ValueError("make_pairs: sensor pairs need cycle offsets (the synthetic pairs' degraded starts)")
     cam = manifest.camera(camera) if camera else manifest.cameras[0]
     frames = split_frames(manifest)[0] if frames is None else list(frames)
     render = SplatRenderer(gaussians)
@@ -112,10 +118,14 @@ def make_pairs(
         tensors["degraded"] = np.concatenate(degraded)
         tensors["degraded_frame"] = np.tile(np.asarray(frames, np.int32), len(cycle_offsets))
         tensors["degraded_offset"] = np.repeat(np.asarray(cycle_offsets, np.float32), len(frames))
+    warper = pair_warper(manifest, gaussians, cam, frames) if warps else None
     if warps:
-        image, mask = pair_warps(manifest, gaussians, cam, frames, render)
+        image, mask = pair_warps(warper, cam, frames, render)
         tensors |= {"warp": conventions.to_uint8(image), "warp_mask": mask.astype(np.uint8),
                     "warp_frame": np.asarray(frames, np.int32)}
+    views = sensor_views(manifest, cam.name, frames) if sensor else []
+    if views:
+        tensors |= sensor_pairs(manifest, views, offsets, render, warper, progress=progress)
     meta = {
         "scene": manifest.name,
         "camera": cam.name,
@@ -134,14 +144,20 @@ def make_pairs(
     return out
 
 
-def pair_warps(manifest: Manifest, gaussians: Gaussians, cam, frames: list[int], render: SplatRenderer):
-    """The warps [F, H, W, 3] (0 where unseen) and masks [F, H, W] of ``frames`` at their recorded
-    cameras, computed as sampling computes them at a shifted camera (rendered depth for the
-    occluder test) but with only the other ``frames`` as sources."""
+def pair_warper(manifest: Manifest, gaussians: Gaussians, cam, frames: list[int]):
+    """The package's warper for ``cam`` with only the pair ``frames`` as sources (held-out frames
+    are no source)."""
     from .warp import package_warper
 
     warper = package_warper(manifest, cam, gaussians)
     warper.sources = {s: src for s, src in warper.sources.items() if s in set(frames)}
+    return warper
+
+
+def pair_warps(warper, cam, frames: list[int], render: SplatRenderer):
+    """The warps [F, H, W, 3] (0 where unseen) and masks [F, H, W] of ``frames`` at their recorded
+    cameras, computed as sampling computes them at a shifted camera (rendered depth for the
+    occluder test) but with only the other ``frames`` as sources."""
     images, masks = [], []
     for i in frames:
         cf = cam.frames[i]
@@ -187,6 +203,7 @@ class PairSet:
         self.left, self.target, self.right = images("left"), images("target"), images("right")
         self.offset = torch.from_numpy(data.get("offset", np.zeros(len(self.left), np.float32)))
         self.path = path
+        self.from_sensor = torch.zeros(len(self.left), dtype=torch.bool)  # per pair: a rig camera's target
         # per pair, the indices of the degraded starts of its recorded frame (empty: none)
         self.degraded = images("degraded") if "degraded" in data else None
         frame = data.get("frame", np.arange(len(self.left), dtype=np.int32))
@@ -205,13 +222,38 @@ class PairSet:
             self.warp_mask = torch.from_numpy(data["warp_mask"]).float()[:, None]
             where = {int(f): k for k, f in enumerate(data["warp_frame"].tolist())}
             self.warp_of = [where[int(f)] for f in frame.tolist()]
+        if "sensor_left" in data:
+            frame = self._add_sensor_pairs(data, images, frame)
         holdout = {int(f) for f in holdout}
         if holdout or held_out:
             keep = [i for i, f in enumerate(frame.tolist()) if (int(f) in holdout) == held_out]
-            self.left, self.target, self.right, self.offset = (
-                x[keep] for x in (self.left, self.target, self.right, self.offset))
+            self.left, self.target, self.right, self.offset, self.from_sensor = (
+                x[keep] for x in (self.left, self.target, self.right, self.offset, self.from_sensor))
             self.starts = [self.starts[i] for i in keep]
             self.warp_of = None if self.warp_of is None else [self.warp_of[i] for i in keep]
+
+    def _add_sensor_pairs(self, data: dict, images, frame: np.ndarray) -> np.ndarray:
+        """Append the pairs a rig's second camera recorded (:mod:`.sensor_pairs`): each starts from
+        the render at its own camera and takes its own warp. Returns every pair's frame."""
+        if self.degraded is None:
+            raise InputError(self.path, "sensor pairs need the synthetic pairs' degraded starts", "sensor_start")
+        if self.warp is not None and "sensor_warp" not in data:
+            raise InputError(self.path, "a pairs file with warps needs its sensor pairs' warps too", "sensor_warp")
+        view = data["sensor_view"].tolist()
+        self.left, self.target, self.right = (torch.cat([x, images(f"sensor_{k}")])
+                                              for x, k in ((self.left, "left"), (self.target, "target"),
+                                                           (self.right, "right")))
+        self.offset = torch.cat([self.offset, torch.from_numpy(data["sensor_offset"])])
+        first = len(self.degraded)
+        self.degraded = torch.cat([self.degraded, images("sensor_start")])
+        self.starts += [[first + v] for v in view]
+        if self.warp is not None:
+            first = len(self.warp)
+            self.warp = torch.cat([self.warp, images("sensor_warp")])
+            self.warp_mask = torch.cat([self.warp_mask, torch.from_numpy(data["sensor_warp_mask"]).float()[:, None]])
+            self.warp_of += [first + v for v in view]
+        self.from_sensor = torch.cat([self.from_sensor, torch.ones(len(view), dtype=torch.bool)])
+        return np.concatenate([frame, data["sensor_frame"]])
 
     def __len__(self) -> int:
         return len(self.target)

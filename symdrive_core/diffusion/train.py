@@ -196,6 +196,7 @@ def train_restorer(
             "file": Path(pairs).name,
             "sha256": file_sha256(pairs),
             "pairs": len(data),
+            "sensor_pairs": int(data.from_sensor.sum()),
             **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets", "cycle_offsets", "drive")
                if k in data.metadata},
         },

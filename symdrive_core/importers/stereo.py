@@ -108,4 +108,4 @@ def lateral_entry(truth: StereoTruth, scale: float, place) -> dict:
     offset = round(truth.baseline * scale, OFFSET_DECIMALS)
     frames = {str(fi): place(v.image, f"gt/lateral/{truth.name}/{fi:06d}{v.image.suffix.lower()}")
               for fi, v in enumerate(truth.views) if v.image is not None}
-    return {"offset_m": offset, "camera": truth.camera, "frames": frames}
+    return {"offset_m": offset, "camera": truth.camera, "frames": frames, "sensor": truth.name}

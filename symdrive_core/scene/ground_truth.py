@@ -5,7 +5,8 @@
       "train_frames": [0, 1, 3, ...], "heldout_frames": [2, 7, ...],
       "depth": "...",                       # how depth maps are stored
       "lateral": [{"offset_m": 0.5, "camera": "front",
-                   "frames": {"0": "gt/lateral/+0.5/000000.png", ...}}, ...],
+                   "frames": {"0": "gt/lateral/+0.5/000000.png", ...},
+                   "sensor": "front_right"}, ...],  # sensor: the rig camera that recorded them
       "insertion": [{"actor", "asset", "kind", "wlh", "pose": {"translation", "rotation"},
                      "camera", "frame", "with", "without", "mask", "shadow_mask" (or null),
                      "mask_pixels", "shadow_pixels"}, ...],
@@ -62,6 +63,7 @@ class LateralView(SeenBy):
     camera: CameraView  # the recorded frame's camera moved offset_m to its right
     image: str  # ground truth, relative to the package
     lanes: str | None = None  # its exact lane-marking mask, relative to the package
+    sensor: str | None = None  # the rig camera that recorded it (None: rendered truth)
 
 
 def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
@@ -74,17 +76,19 @@ def lane_masks(manifest: Manifest) -> dict[tuple[str, float, int], str]:
     return out
 
 
-def lateral_views(manifest: Manifest) -> list[LateralView]:
-    """Every lateral ground-truth image with its (shifted) camera and lane mask (where the
-    package has one), in offset then frame order."""
+def lateral_views(manifest: Manifest, camera: str | None = None) -> list[LateralView]:
+    """Every lateral ground-truth image (``camera``: of that package camera only) with its
+    (shifted) camera and lane mask (where the package has one), in offset then frame order."""
     masks = lane_masks(manifest)
     out = []
     for entry in (manifest.ground_truth or {}).get("lateral", []):
         cam = manifest.camera(entry.get("camera", manifest.cameras[0].name))
+        if camera is not None and cam.name != camera:
+            continue
         off = float(entry["offset_m"])
         for key, rel in sorted(entry["frames"].items(), key=lambda kv: int(kv[0])):
             out.append(LateralView(off, int(key), CameraView.of_frame(cam, int(key)).shifted(off), rel,
-                                   masks.get((cam.name, off, int(key)))))
+                                   masks.get((cam.name, off, int(key))), entry.get("sensor")))
     return out
 
 

@@ -10,7 +10,7 @@ from safetensors.numpy import save_file
 
 from symdrive_core import conventions
 from symdrive_core.diffusion import warp as warp_module
-from symdrive_core.diffusion.data import PairSet, pair_warps
+from symdrive_core.diffusion.data import PairSet, pair_warper, pair_warps
 from symdrive_core.diffusion.models import BuiltinRestorer, load_builtin, save_builtin
 from symdrive_core.diffusion.restore import LateralChain
 from symdrive_core.diffusion.sampler import SamplerConfig
@@ -72,7 +72,7 @@ def test_a_pair_warp_never_uses_its_own_frame_or_frames_outside_the_pairs(monkey
     frames = [SimpleNamespace(K=K, camera_to_world=down_camera(float(i)),
                               world_to_camera=conventions.invert_rigid(down_camera(float(i)))) for i in range(9)]
     cam = SimpleNamespace(frames=frames, width=W, height=H)
-    image, mask = pair_warps(None, None, cam, [3, 4, 6], DepthOffsetRenderer())
+    image, mask = pair_warps(pair_warper(None, None, cam, [3, 4, 6]), cam, [3, 4, 6], DepthOffsetRenderer())
     assert image.shape == (3, H, W, 3) and mask.shape == (3, H, W)
     assert np.isfinite(image[1]).all() and mask[1].mean() > 0.5  # frame 4's warp: from frames 3 and 6 alone
     assert set(warper.sources) == {3, 4, 6}

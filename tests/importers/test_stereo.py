@@ -77,7 +77,7 @@ def _assert_truth_is_the_right_camera(m, root, n_frames, tol_m):
     view's camera is the right camera where the rig had it."""
     assert [c.name for c in m.cameras] == ["left"] and len(m.cameras[0].frames) == n_frames
     (entry,) = m.ground_truth["lateral"]
-    assert entry["camera"] == "left"
+    assert entry["camera"] == "left" and entry["sensor"] == "right"  # recorded, not rendered
     assert abs(entry["offset_m"] - BASELINE) < tol_m, entry["offset_m"]
     assert m.effects.lateral_offsets == [entry["offset_m"]]
     frames, _ = _truth_frames()
@@ -85,7 +85,7 @@ def _assert_truth_is_the_right_camera(m, root, n_frames, tol_m):
     for k, rel in entry["frames"].items():
         assert m.resolve(rel).samefile(root / "images" / "right" / f"{frames[int(k)]:06d}.png")
     views = lateral_views(m)
-    assert len(views) == n_frames
+    assert len(views) == n_frames and {v.sensor for v in views} == {"right"}
     return views
 
 

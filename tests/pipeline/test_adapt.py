@@ -105,3 +105,16 @@ def test_the_command_line_turns_adaptation_off_and_checks_its_budget(drive, caps
             main(["run", str(drive), *bad])
         last = capsys.readouterr().err.strip().splitlines()[-1]
         assert exc.value.code == 2 and last.startswith("symdrive run: error:") and bad[0] in last
+
+
+def test_the_command_line_leaves_a_rigs_pairs_out_of_the_adaptation(drive, monkeypatch):
+    import symdrive_core.pipeline.run as run_module
+    from symdrive_core.cli import main
+
+    seen = []
+    monkeypatch.setattr(run_module, "run_scene",
+                        lambda *a, stage_options, **k: seen.append(stage_options.adapt) or {"stages": []})
+    assert main(["run", str(drive), "--quiet"]) == 0
+    assert main(["run", str(drive), "--quiet", "--no-sensor-pairs", "--adapt-iters", "7"]) == 0
+    assert seen[0] == AdaptConfig() and seen[0].sensor_pairs
+    assert seen[1] == replace(AdaptConfig(), sensor_pairs=False, iters=7)
