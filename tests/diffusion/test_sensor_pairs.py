@@ -85,8 +85,11 @@ def test_pair_set_reads_sensor_pairs_with_their_own_start_and_warp(rig, tmp_path
     assert without_2.from_sensor.sum() == 1 and len(without_2) == len(pairs) - 2
     only_2 = PairSet(path, holdout=[2], held_out=True)
     assert only_2.from_sensor.tolist() == [False, True]
-    left, target, right, start, guide = pairs.batch(8, 12, torch.Generator().manual_seed(0), 1.0)
-    assert guide.shape == (8, 4, 12, 12) and torch.isfinite(start).all()
+    _, target, _, start, guide = pairs.batch(64, 64, torch.Generator().manual_seed(0), 1.0)  # whole images
+    assert guide.shape == (64, 4, 32, 48) and torch.isfinite(start).all()
+    recorded = [pairs.target[i] for i in range(synthetic, len(pairs))]
+    drawn = sum(any(torch.equal(t, r) or torch.equal(t, r.flip(-1)) for r in recorded) for t in target)
+    assert 0 < drawn < 64  # the second camera's images reach the batches, beside the synthetic pairs
 
 
 def test_a_sensor_image_of_the_wrong_size_is_named(rig, tmp_path):
