@@ -54,10 +54,12 @@ def _write(root: Path) -> int:
         raise InputError(manifest.path, "not written by scripts/make_world.py", "ground_truth.generator")
     cam = manifest.camera(gt.get("camera", manifest.cameras[0].name))
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    street = build_street(gen["seed"], gen["overcast"], (gen["frames"] - 1) * gen["spacing_m"])
+    street = build_street(gen["seed"], gen["overcast"], (gen["frames"] - 1) * gen["spacing_m"],
+                          gen.get("material_jitter", 0.0))
     render.setup_cycles(gen["width"], gen["height"], lanes.SAMPLES, gen["seed"])
-    cam_obj = render.make_camera()
-    poses = drive.drive(street, gen["frames"], gen["spacing_m"])
+    cam_obj = render.make_camera(gen.get("lens_mm", render.LENS_MM))
+    poses = drive.drive(street, gen["frames"], gen["spacing_m"], height=gen.get("camera_height_m", drive.CAMERA_HEIGHT),
+                        pitch_deg=gen.get("pitch_deg", drive.PITCH_DEG))
     for i, (pose, cf) in enumerate(zip(poses, cam.frames, strict=True)):
         if not (np.allclose(pose, cf.camera_to_world, atol=1e-6) and np.allclose(render.camera_K(cam_obj), cf.K)):
             raise InputError(manifest.path, "the rebuilt street's camera differs from the package's",

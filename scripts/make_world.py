@@ -15,6 +15,9 @@ again with it removed, moved one lane across and 0.5 s later. ``ground_truth`` i
 settings give the same scene and cameras; ``--traffic 0`` is the street without traffic.
 With ``--parked-existing`` the parked cars in view of the drive are existing actors too
 (``world.parked``), and each held-out frame is rendered again without its most visible one.
+``--camera-height``, ``--pitch``, ``--lens-mm``, ``--material-jitter`` and the sensor's
+``--noise``, ``--blur`` and ``--exposure-jitter`` (``world.sensor``) vary what another drive varies,
+for a family of streets; their defaults are the built-in street.
 """
 
 from __future__ import annotations
@@ -32,6 +35,9 @@ LATERAL_OFFSETS = (-3.0, -2.0, -1.5, -1.0, -0.5, 0.5, 1.0, 1.5, 2.0, 3.0)
 
 
 def parse_args(argv=None):
+    import bpy  # noqa: F401  (first: the world modules import bmesh, which comes with it)
+    from world import drive, render
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", required=True, type=Path, help="package directory to write (replaced atomically)")
     p.add_argument("--seed", type=int, default=0)
@@ -57,6 +63,16 @@ def parse_args(argv=None):
                         "pose in every frame, no assets), and each held-out frame gets a remove edit of its most "
                         "visible parked car (at least --edit-pixels); gt/vehicles stays the moving traffic only")
     p.add_argument("--save-blend", action="store_true", help="also save world.blend in the package")
+    # what another drive varies: the camera, the ground's materials, the sensor (a family of streets)
+    p.add_argument("--camera-height", type=float, default=drive.CAMERA_HEIGHT, help="metres above the road")
+    p.add_argument("--pitch", type=float, default=drive.PITCH_DEG, help="degrees the camera looks down")
+    p.add_argument("--lens-mm", type=float, default=render.LENS_MM, help="focal length on a 36 mm sensor")
+    p.add_argument("--material-jitter", type=float, default=0.0,
+                   help="each ground material's colours scaled by a seeded 1 +/- this per channel")
+    p.add_argument("--noise", type=float, default=0.0, help="sensor noise: standard deviation in [0, 1] units")
+    p.add_argument("--blur", type=float, default=0.0, help="Gaussian blur of every recorded image, sigma in pixels")
+    p.add_argument("--exposure-jitter", type=float, default=0.0,
+                   help="each frame's exposure scaled by exp(u), u uniform in +/- this")
     return p.parse_args(argv)
 
 

@@ -24,5 +24,6 @@ def camera_pose(street: Street, x: float, lateral: float = RIGHT_LANE, height: f
     return c2w
 
 
-def drive(street: Street, frames: int, spacing: float, start_x: float = 0.0) -> list[np.ndarray]:
-    return [camera_pose(street, start_x + i * spacing) for i in range(frames)]
+def drive(street: Street, frames: int, spacing: float, start_x: float = 0.0, height: float = CAMERA_HEIGHT,
+          pitch_deg: float = PITCH_DEG) -> list[np.ndarray]:
+    return [camera_pose(street, start_x + i * spacing, height=height, pitch_deg=pitch_deg) for i in range(frames)]

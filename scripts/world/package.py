@@ -39,6 +39,7 @@ from .assets import export_car
 from .insertion import place_object, placement_pose, shadow_mask
 from .meshdata import scene_triangles
 from .parked import Parked
+from .sensor import SensorEffects
 from .street import LANE_WIDTH, LANES, build_street
 from .traffic import EDIT_KINDS, RETIME_S, TRAFFIC_INDEX, Traffic, ego_vehicle
 from .vehicles import ASSET_PAINTS, PRESETS, build_car
@@ -56,11 +57,13 @@ class PackageWriter:
         self.root, self.args = Path(root), args
         bpy.ops.wm.read_factory_settings(use_empty=True)
         drive_end = (args.frames - 1) * args.spacing
-        self.street = build_street(args.seed, args.overcast, drive_end)
+        self.street = build_street(args.seed, args.overcast, drive_end, args.material_jitter)
         render.setup_cycles(args.width, args.height, args.samples, args.seed)
-        self.cam = render.make_camera()
+        self.cam = render.make_camera(args.lens_mm)
         self.K = render.camera_K(self.cam)
-        self.poses = drive.drive(self.street, args.frames, args.spacing)
+        self.poses = drive.drive(self.street, args.frames, args.spacing, height=args.camera_height,
+                                 pitch_deg=args.pitch)
+        self.sensor = SensorEffects(args.noise, args.blur, args.exposure_jitter)
         self.heldout = list(range(args.holdout_every // 2, args.frames, args.holdout_every)) if args.holdout_every else []
         self.train = [i for i in range(args.frames) if i not in self.heldout]
         self.train_images: dict[int, np.ndarray] = {}
@@ -108,6 +111,12 @@ class PackageWriter:
         self.render_seconds.append(time.perf_counter() - t)
         return out
 
+    def _record(self, rgb: np.ndarray, frame: int, rel: str) -> np.ndarray:
+        """Write a render of ``frame`` at ``rel`` as the camera records it (:mod:`.sensor`)."""
+        rgb = self.sensor.apply(rgb, self.args.seed, frame, rel)
+        write_image(self.root / rel, rgb)
+        return rgb
+
     def plan(self) -> list:
         """Every Cycles render as a job, training frames first (later jobs reuse their depth)."""
         jobs = [lambda i=i: self._train(i) for i in range(self.args.frames)]
@@ -125,9 +134,9 @@ class PackageWriter:
 
     def _train(self, i: int) -> None:
         out = self._render(self.poses[i], i)
-        write_image(self.root / f"gt/train/{i:06d}.png", out["rgb"])
+        rgb = self._record(out["rgb"], i, f"gt/train/{i:06d}.png")
         write_image(self.root / f"gt/depth/{i:06d}.exr", out["depth"], dtype="float")
-        self.train_images[i], self.train_depths[i] = out["rgb"], out["depth"]
+        self.train_images[i], self.train_depths[i] = rgb, out["depth"]
         if self.traffic is not None:
             self._vehicle_mask(i, out["index"])
         if self.parked is not None and i in self.heldout:
@@ -153,7 +162,7 @@ class PackageWriter:
         c2w = conventions.lateral_shift(self.poses[i], offset)
         out = self._render(c2w, i)
         rel = f"gt/lateral/{lateral_dir(offset)}/{i:06d}.png"
-        write_image(self.root / rel, out["rgb"])
+        self._record(out["rgb"], i, rel)
         self.lateral.setdefault(offset, {})[str(i)] = rel
         self.lanes_lateral.setdefault(offset, {})[i] = self._lane_mask(c2w, lanes.lateral_path(lateral_dir(offset), i))
 
@@ -173,7 +182,7 @@ class PackageWriter:
         finally:
             obj.hide_render = True
         base = f"gt/insertion/{k:02d}"
-        write_image(self.root / f"{base}/with.png", out["rgb"])
+        self._record(out["rgb"], frame, f"{base}/with.png")
         write_mask(self.root / f"{base}/mask.png", mask)
         if shadow is not None:
             write_mask(self.root / f"{base}/shadow.png", shadow)
@@ -209,7 +218,7 @@ class PackageWriter:
         out = self._render(self.poses[frame], frame, {k: pose})
         mask = (self.heldout_index[frame] if pose is None else out["index"]) == TRAFFIC_INDEX + k
         base = f"gt/edits/{len(self.edits):02d}"
-        write_image(self.root / f"{base}/image.png", out["rgb"])
+        self._record(out["rgb"], frame, f"{base}/image.png")
         write_mask(self.root / f"{base}/mask.png", mask)
         self.edits.append({"kind": kind, "actor": f"car_{k}", "camera": "front", "frame": frame,
                            "image": f"{base}/image.png", "mask": f"{base}/mask.png",
@@ -234,7 +243,7 @@ class PackageWriter:
             obj.hide_render = False
         mask = self.parked.mask(self.heldout_index[frame], k)
         base = f"gt/edits/{len(self.edits):02d}"
-        write_image(self.root / f"{base}/image.png", out["rgb"])
+        self._record(out["rgb"], frame, f"{base}/image.png")
         write_mask(self.root / f"{base}/mask.png", mask)
         self.edits.append({"kind": "remove", "actor": self.parked.actor_id(k), "camera": "front", "frame": frame,
                            "image": f"{base}/image.png", "mask": f"{base}/mask.png", "pose": None,
@@ -294,6 +303,8 @@ class PackageWriter:
                 "overcast": a.overcast, "lateral_every": a.lateral_every, "blender": bpy.app.version_string,
                 "seconds_per_render": round(self.seconds_per_render, 3), "renders": self.renders,
                 "points": self.n_points, "colour": "sRGB (Standard view transform, no look)",
+                "camera_height_m": a.camera_height, "pitch_deg": a.pitch, "lens_mm": a.lens_mm,
+                "material_jitter": a.material_jitter, "sensor": self.sensor.to_json(),
             },
         }
         if self.traffic is not None:

@@ -52,7 +52,10 @@ def setup_cycles(width: int, height: int, samples: int, seed: int = 0, threads: 
     layer.use_pass_object_index = True
 
 
-def make_camera(lens_mm: float = 24.0, sensor_mm: float = 36.0):
+LENS_MM = 24.0  # the built-in street's lens on a 36 mm sensor
+
+
+def make_camera(lens_mm: float = LENS_MM, sensor_mm: float = 36.0):
     cam = bpy.data.cameras.new("front")
     cam.lens = lens_mm
     cam.sensor_width = sensor_mm

@@ -67,13 +67,20 @@ def _path(street: Street, x0=X_START, x1=X_END, step=1.0):
     return path, normals
 
 
-def _road(street: Street, col):
+GROUND = ("asphalt", "paint", "kerb", "sidewalk", "verge")  # the materials material_jitter tints
+
+
+def _road(street: Street, col, tints: dict[str, np.ndarray]):
+    def c(name, rgb):
+        return tuple(float(v) for v in np.clip(np.asarray(rgb) * tints[name], 0.0, 1.0))
+
     mats = {
-        "asphalt": materials.mottled("asphalt", (0.05, 0.05, 0.055), (0.13, 0.13, 0.13), 4.0, 0.85),
-        "paint": materials.plain("marking", (0.85, 0.85, 0.82), 0.5),
-        "kerb": materials.mottled("kerb", (0.42, 0.41, 0.4), (0.58, 0.57, 0.55), 6.0, 0.8, 0.05),
-        "sidewalk": materials.tiles("sidewalk", (0.5, 0.48, 0.45), (0.22, 0.21, 0.2), 0.6),
-        "verge": materials.mottled("verge", (0.12, 0.16, 0.06), (0.25, 0.27, 0.12), 1.5, 0.9),
+        "asphalt": materials.mottled("asphalt", c("asphalt", (0.05, 0.05, 0.055)), c("asphalt", (0.13, 0.13, 0.13)),
+                                     4.0, 0.85),
+        "paint": materials.plain("marking", c("paint", (0.85, 0.85, 0.82)), 0.5),
+        "kerb": materials.mottled("kerb", c("kerb", (0.42, 0.41, 0.4)), c("kerb", (0.58, 0.57, 0.55)), 6.0, 0.8, 0.05),
+        "sidewalk": materials.tiles("sidewalk", c("sidewalk", (0.5, 0.48, 0.45)), c("sidewalk", (0.22, 0.21, 0.2)), 0.6),
+        "verge": materials.mottled("verge", c("verge", (0.12, 0.16, 0.06)), c("verge", (0.25, 0.27, 0.12)), 1.5, 0.9),
     }
     path, normals = _path(street)
     objs = [strip("road", path, normals, [-ROAD_HALF, 0.0, ROAD_HALF], [0, 0, 0], mats["asphalt"], col)]
@@ -211,13 +218,16 @@ def _sun(overcast: bool, elevation: float, azimuth: float):
     return obj, -np.array(towards_sun)
 
 
-def build_street(seed: int, overcast: bool, drive_end_x: float) -> Street:
-    """Build the whole static scene into the current (empty) Blender scene."""
+def build_street(seed: int, overcast: bool, drive_end_x: float, material_jitter: float = 0.0) -> Street:
+    """Build the whole static scene into the current (empty) Blender scene; ``material_jitter``
+    scales each ground material's colours by a seeded factor per channel within 1 +/- it (0: the
+    built-in colours; its own random stream, so the street's layout does not change with it)."""
     rng = np.random.default_rng(seed)
     street = Street(amp=float(rng.uniform(1.0, 2.5)), period=float(rng.uniform(140, 200)))
     col = bpy.data.collections.new("background")
     bpy.context.scene.collection.children.link(col)
-    street.background += _road(street, col)
+    tints = np.random.default_rng([seed, 1]).uniform(1 - material_jitter, 1 + material_jitter, (len(GROUND), 3))
+    street.background += _road(street, col, dict(zip(GROUND, tints, strict=True)))
     street.background += _buildings(street, rng, col)
     street.background += _props(street, rng, col)
     street.parked = _parked_cars(street, rng, col, drive_end_x)
