@@ -2,9 +2,9 @@
 # Reproduce the shipped restorer weights (symdrive_core/diffusion/weights/restorer.*):
 # render training pairs from the built-in street's SHIPPED reconstruction (the one restoration
 # runs on), from the package's training frames only (the held-out frames stay unseen), with the
-# degraded starts of six cycle reconstructions (about 10 minutes), then train on this CPU in two
-# stages: 9000 steps from recorded starts (about 23 minutes on two threads), 3000 more with half
-# of each batch started from a degraded render (about 8 minutes).
+# degraded starts of six cycle reconstructions (about 10 minutes; 23 on a busy machine), then train
+# on this CPU in two stages: 9000 steps from recorded starts (about 23 minutes on two threads; 27 on
+# a busy machine), 3000 more with half of each batch started from a degraded render (about 8 minutes).
 #   scripts/train_restorer.sh [WORK_DIR]        (default: out/restorer-train)
 set -euo pipefail
 cd "$(dirname "$0")/.."
