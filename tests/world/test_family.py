@@ -9,7 +9,7 @@ import pytest
 
 from symdrive_core.io.images import read_image
 from symdrive_core.scene import check_files, load_manifest
-from tests.scripts import SCRIPTS, load_script
+from tests.scripts import SCRIPTS, write_world
 
 if str(SCRIPTS) not in sys.path:
     sys.path.insert(0, str(SCRIPTS))
@@ -50,17 +50,11 @@ def test_the_blur_has_the_asked_width_and_keeps_the_mean():
 def varied(tmp_path_factory):
     """A 48x27, two-frame street with every variation, rendered in this process."""
     pytest.importorskip("bpy")
-    from world.package import PackageWriter
-
-    args = load_script("make_world").parse_args([
-        "--out", "unused", "--width", "48", "--height", "27", "--frames", "2", "--samples", "2", "--offsets",
-        "1.0", "--lateral-every", "2", "--holdout-every", "0", "--placements", "0", "--points", "500",
-        "--asset-splats", "200", *VARIED])
     root = tmp_path_factory.mktemp("family")
-    writer = PackageWriter(root, args)
-    for job in writer.plan():
-        job()
-    writer.finish()
+    writer = write_world(root, [
+        "--width", "48", "--height", "27", "--frames", "2", "--samples", "2", "--offsets", "1.0",
+        "--lateral-every", "2", "--holdout-every", "0", "--placements", "0", "--points", "500",
+        "--asset-splats", "200", *VARIED])
     return writer, load_manifest(root)
 
 

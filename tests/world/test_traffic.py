@@ -16,7 +16,7 @@ from symdrive_core.scene.ground_truth import edit_truth, vehicle_masks
 from symdrive_core.scene.manifest import ManifestError
 from symdrive_core.scene.poses import yaw_of
 from tests.conftest import manifest_dict
-from tests.scripts import SCRIPTS, load_script
+from tests.scripts import SCRIPTS, write_world
 
 DURATION = 3.9  # 40 frames 1 m apart at the ego's 10 m/s
 TIMES = np.linspace(0.0, DURATION, 40)
@@ -151,17 +151,11 @@ def test_edited_poses_follow_the_trajectory_or_cross_the_road(world):
 def package(world, tmp_path_factory):
     """64x36, 4 frames (frame 1 held out), one traffic car, rendered in this process so that the
     Blender objects can be compared with what the manifest says."""
-    from world.package import PackageWriter
-
-    args = load_script("make_world").parse_args([
-        "--out", "unused", "--width", "64", "--height", "36", "--frames", "4", "--samples", "4", "--offsets",
+    root = tmp_path_factory.mktemp("traffic")
+    writer = write_world(root, [
+        "--width", "64", "--height", "36", "--frames", "4", "--samples", "4", "--offsets",
         "--holdout-every", "3", "--placements", "0", "--points", "2000", "--asset-splats", "300",
         "--traffic", "1", "--edit-pixels", "10"])
-    root = tmp_path_factory.mktemp("traffic")
-    writer = PackageWriter(root, args)
-    for job in writer.plan():
-        job()
-    writer.finish()
     return writer, load_manifest(root)
 
 
@@ -275,16 +269,10 @@ def test_a_wrong_edit_or_vehicle_entry_names_its_field(tmp_path, gt, field):
 def test_parked_cars_are_existing_actors_with_removal_truth(world, tmp_path):
     """--parked-existing without traffic: the parked actors sit where Blender put the cars and a
     held-out frame has a parked car removed (recorded mask, Cycles render without it)."""
-    from world.package import PackageWriter
-
-    args = load_script("make_world").parse_args([
-        "--out", "unused", "--width", "64", "--height", "36", "--frames", "4", "--samples", "4", "--offsets",
+    writer = write_world(tmp_path, [
+        "--width", "64", "--height", "36", "--frames", "4", "--samples", "4", "--offsets",
         "--holdout-every", "3", "--placements", "0", "--points", "2000", "--asset-splats", "300",
         "--edit-pixels", "5", "--parked-existing"])
-    writer = PackageWriter(tmp_path, args)
-    for job in writer.plan():
-        job()
-    writer.finish()
     m = load_manifest(tmp_path)
     check_files(m)
     assert m.actors and all(a.kind == "existing" and a.id.startswith("parked_") for a in m.actors)
