@@ -6,8 +6,7 @@ has them; a family of generated streets with them is nearer the drives it will r
 the generator's camera records goes through the same model (recorded frames, lateral truth,
 insertion and edit truth): the images of one frame share its exposure, each draws its own noise,
 seeded by the generator seed, the frame and the image's path in the package, so a package
-regenerates bit for bit. Off by default: the built-in street is
-clean.
+regenerates bit for bit. Off by default: the built-in street is clean.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ import numpy as np
 class SensorEffects:
     noise: float = 0.0  # standard deviation of additive Gaussian noise, in sRGB units of [0, 1]
     blur_px: float = 0.0  # standard deviation of a Gaussian blur, in pixels
-    exposure_jitter: float = 0.0  # each image's gain is exp(u), u uniform in [-j, j]
+    exposure_jitter: float = 0.0  # each frame's gain is exp(u), u uniform in [-j, j]
 
     @property
     def active(self) -> bool:

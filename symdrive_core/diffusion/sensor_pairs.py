@@ -44,8 +44,8 @@ def sensor_pairs(manifest, views: list[LateralView], offsets, render, warper=Non
         path = manifest.resolve(v.image)
         truth = read_image(path, channels=3)
         if truth.shape[:2] != (v.camera.height, v.camera.width):
-            raise InputError(path, f"image is {truth.shape[1]}x{truth.shape[0]}, the camera it is lateral truth "
-                             f"of {v.camera.width}x{v.camera.height}", f"ground_truth.lateral (frame {v.frame})")
+            raise InputError(path, f"image is {truth.shape[1]}x{truth.shape[0]}; the camera it is lateral "
+                             f"truth of is {v.camera.width}x{v.camera.height}", f"ground_truth.lateral (frame {v.frame})")
         raw = render(v.camera)
         for d in offsets:
             left.append(conventions.to_uint8(render(v.camera.shifted(-d))))
