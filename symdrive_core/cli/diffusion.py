@@ -197,6 +197,9 @@ def add_commands(sub) -> None:
     p.add_argument("--strength", type=unit_fraction,
                    help="share of the restorer's correction each view keeps, 0 (its start) to 1 (the full "
                         "correction) (default: what the weights record, fitted by an adaptation, else 1)")
+    p.add_argument("--keep-warp", action=argparse.BooleanOptionalAction,
+                   help="a guided restorer's view keeps the warp where the recorded frames saw the ground "
+                        f"(default: {default_of(SamplerConfig, 'keep_warp')})")
     p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles "
                         f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
@@ -364,7 +367,7 @@ def _restore(args) -> int:
     # the backend's sampler with the pipeline's memory budget, then what the command line set
     default = replace(SAMPLERS[args.backend], max_memory_gib=StageOptions().sampler.max_memory_gib)
     sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", "noise_free", "strength",
-                                         max_memory_gib="max_memory"))
+                                         "keep_warp", max_memory_gib="max_memory"))
     steps, n_start = sampler.steps, sampler.n_start
     if n_start >= steps:
         raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "

@@ -60,6 +60,12 @@ class SamplerConfig:
     # (see :mod:`.strength`). None: the restorer's own, which an adaptation fits on the drive's
     # held-out recorded frames (1 for weights that record none: the full correction).
     strength: float | None = None
+    # A guided restorer's view keeps the warp where the warp's mask is set: there the recorded
+    # frames saw the ground, checked against depth, and their pixels are what the camera would
+    # see. The restorer's correction fills the rest (objects, what no frame saw), and the
+    # mask's pixels still condition it. False: the restorer's output everywhere (on the built-in
+    # street it lost 2 to 9 dB to the warp inside the mask, docs/results.md).
+    keep_warp: bool = True
     # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
     # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
     max_memory_gib: float | None = None

@@ -93,7 +93,16 @@ def restore_image(
     out = out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
     if init is not None:
         out = toward(init, out, restoring_strength(restorer, config))
+    if zg is not None and config.keep_warp:
+        out = kept_warp(out, guide)
     return greyed(out) if is_grey(left, right, init) else out
+
+
+def kept_warp(restored: torch.Tensor, guide: torch.Tensor) -> torch.Tensor:
+    """``restored`` [B, 3, H, W] with the guide's warp (its first three channels) where its mask (the fourth) is set."""
+    guide = guide.to(restored.device, restored.dtype)
+    mask = guide[:, 3:4]
+    return mask * guide[:, :3] + (1.0 - mask) * restored
 
 
 def restoring_strength(restorer, config: SamplerConfig = DEFAULT) -> float:

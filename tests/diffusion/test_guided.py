@@ -165,3 +165,18 @@ def test_shipped_guided_weights_serve_the_guided_methods_only(tmp_path, monkeypa
     c.by_method(0.5, "geo_single_view")
     assert [(r is base.guided, g is not None) for r, g in used] == [(False, False), (True, True)]
 
+
+
+@pytest.mark.parametrize("keep", [True, False])
+def test_a_guided_view_keeps_the_warp_where_frames_saw_the_ground(keep):
+    restorer = BuiltinRestorer(with_guide(trained_like()))
+    recorded = np.full((4, 6, 3), 0.5, np.float32)
+    c = LateralChain(restorer, DepthOffsetRenderer(), recorded, CameraView(np.eye(4), np.eye(3), 6, 4),
+                     SamplerConfig(steps=2, n_start=1, noise_free=True, keep_warp=keep), SeenWarper(2), 0)
+    for method in ("geo_single_view", "geo_ar_d0.5"):
+        view, warp = c.by_method(1.0, method), c.warp(1.0)
+        seen = np.abs(view[:, :2] - warp[:, :2]).max()
+        assert (seen < 1e-6) if keep else (seen > 1e-3), method
+        assert np.abs(view[:, 2:] - warp[:, 2:]).max() > 1e-3  # what no frame saw: the restorer's
+    unguided = c.by_method(1.0, "single_view")  # its guide is the render with nothing seen
+    assert np.abs(unguided[:, :2] - c.warp(1.0)[:, :2]).max() > 1e-3

@@ -106,7 +106,7 @@ def test_the_sampler_moves_its_start_by_the_strength():
     model = restorer()
     g = torch.Generator().manual_seed(0)
     left, right, init = (torch.rand(1, 3, 16, 24, generator=g) for _ in range(3))
-    guide = torch.cat([init, torch.ones(1, 1, 16, 24)], dim=1)
+    guide = torch.cat([init, torch.zeros(1, 1, 16, 24)], dim=1)  # no frame saw it: all of it restored
     full = restore_image(model, left, right, init, replace(SAMPLER, strength=1.0), guide)
     assert not torch.allclose(full, init, atol=1e-3)
     assert torch.equal(restore_image(model, left, right, init, replace(SAMPLER, strength=0.0), guide), init)
