@@ -199,7 +199,7 @@ def add_commands(sub) -> None:
                         "correction) (default: what the weights record, fitted by an adaptation, else 1)")
     p.add_argument("--keep-warp", action=argparse.BooleanOptionalAction,
                    help="a guided restorer's view keeps the warp where the recorded frames saw the ground "
-                        f"(default: {default_of(SamplerConfig, 'keep_warp')})")
+                        "(default: what the weights record, chosen by an adaptation, else on)")
     p.add_argument("--max-memory", type=float, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles "
                         f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")

@@ -152,8 +152,9 @@ def pair_frames(pairs: Path) -> list[int]:
 
 
 def _fit_strength(out: Path, held: list[int], sampler, guided: bool) -> dict:
-    """Fit the trained weights' strength on the ``held`` frames' pairs and write it into the
-    weights (their sampler keeps that share of the correction); ``{"strength": 1}`` without them."""
+    """Fit the trained weights' strength and keep_warp on the ``held`` frames' pairs and write them
+    into the weights (their sampler keeps that share of the correction, and the warp or not);
+    ``{"strength": 1, "keep_warp": True}`` without them."""
     from .data import PairSet
     from .models import load_builtin, save_builtin
     from .strength import fit_strength
@@ -164,6 +165,7 @@ def _fit_strength(out: Path, held: list[int], sampler, guided: bool) -> dict:
         restorer = load_builtin(out / WEIGHTS)
         fit = fit_strength(restorer, PairSet(out / PAIRS, held, held_out=True), sampler, guided=guided)
     if fit is None:
-        return {"strength": 1.0, "frames": held, "fit": None}
-    save_builtin(out / WEIGHTS, restorer.net, {**weights_meta(out / WEIGHTS), "strength": fit.strength}, half=True)
-    return {"strength": fit.strength, "frames": held, "fit": fit.to_json()}
+        return {"strength": 1.0, "keep_warp": True, "frames": held, "fit": None}
+    save_builtin(out / WEIGHTS, restorer.net,
+                 {**weights_meta(out / WEIGHTS), "strength": fit.strength, "keep_warp": fit.keep_warp}, half=True)
+    return {"strength": fit.strength, "keep_warp": fit.keep_warp, "frames": held, "fit": fit.to_json()}

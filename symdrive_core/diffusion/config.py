@@ -61,11 +61,12 @@ class SamplerConfig:
     # held-out recorded frames (1 for weights that record none: the full correction).
     strength: float | None = None
     # A guided restorer's view keeps the warp where the warp's mask is set: there the recorded
-    # frames saw the ground, checked against depth, and their pixels are what the camera would
-    # see. The restorer's correction fills the rest (objects, what no frame saw), and the
-    # mask's pixels still condition it. False: the restorer's output everywhere (on the built-in
-    # street it lost 2 to 9 dB to the warp inside the mask, docs/results.md).
-    keep_warp: bool = True
+    # frames saw the ground, checked against depth. The restorer's correction fills the rest
+    # (objects, what no frame saw); the mask's pixels still condition it. None: what the weights
+    # record (an adaptation chooses it on the drive's held-out frames, :mod:`.strength`), else
+    # True. On the built-in street the restorer's output lost 2 to 9 dB to the warp inside the
+    # mask (docs/results.md).
+    keep_warp: bool | None = None
     # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is
     # split, then the image is cut into overlapping tiles (see :mod:`.tiling`).
     max_memory_gib: float | None = None

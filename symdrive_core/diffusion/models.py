@@ -28,12 +28,15 @@ from .unet import UNet, UNetConfig
 class BuiltinRestorer:
     """The shipped UNet in pixel space (no time shift). ``guided``: the restorer the
     geometry-guided methods sample with instead of this one (None: this one); ``strength``: the
-    share of its correction a sampler keeps unless told otherwise (:mod:`.strength`)."""
+    share of its correction a sampler keeps unless told otherwise, ``keep_warp``: whether its
+    views keep the warp where frames saw the ground unless told otherwise (:mod:`.strength`)."""
 
-    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None, strength: float = 1.0):
+    def __init__(self, net: UNet, guided: BuiltinRestorer | None = None, strength: float = 1.0,
+                 keep_warp: bool = True):
         self.net = net
         self.guided = guided
         self.strength = strength
+        self.keep_warp = keep_warp
         self.latent = PixelSpace()
 
     def time_shift(self, latent_shape) -> float:
@@ -101,18 +104,32 @@ def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
         net.load_state_dict(state)
     except RuntimeError as exc:
         raise InputError(path, f"weights do not match their config: {exc}") from exc
-    return BuiltinRestorer(net.eval(), strength=_strength(path, meta.get("meta")))
+    recorded = _recorded(meta.get("meta"))
+    return BuiltinRestorer(net.eval(), strength=_strength(path, recorded), keep_warp=_keep_warp(path, recorded))
 
 
-def _strength(path: Path, meta: str | None) -> float:
-    """The strength the weights record (``meta.strength``, fitted by an adaptation), else 1."""
+def _recorded(meta: str | None) -> dict:
     try:
-        value = json.loads(meta or "{}").get("strength", 1.0)
-    except (json.JSONDecodeError, AttributeError):
-        return 1.0
+        value = json.loads(meta or "{}")
+    except json.JSONDecodeError:
+        return {}
+    return value if isinstance(value, dict) else {}
+
+
+def _strength(path: Path, meta: dict) -> float:
+    """The strength the weights record (``meta.strength``, fitted by an adaptation), else 1."""
+    value = meta.get("strength", 1.0)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
         raise InputError(path, f"strength {value!r} is not a number in [0, 1]", "meta.strength")
     return float(value)
+
+
+def _keep_warp(path: Path, meta: dict) -> bool:
+    """Whether the weights' views keep the warp (``meta.keep_warp``, chosen by an adaptation), else True."""
+    value = meta.get("keep_warp", True)
+    if not isinstance(value, bool):
+        raise InputError(path, f"keep_warp {value!r} is not true or false", "meta.keep_warp")
+    return value
 
 
 def load_restorer(backend: str = "builtin", weights: str | os.PathLike | None = None, **flux_files):

@@ -93,7 +93,7 @@ def restore_image(
     out = out.reshape(-1, k, *out.shape[1:]).mean(dim=1) if k > 1 else out
     if init is not None:
         out = toward(init, out, restoring_strength(restorer, config))
-    if zg is not None and config.keep_warp:
+    if zg is not None and keeps_warp(restorer, config):
         out = kept_warp(out, guide)
     return greyed(out) if is_grey(left, right, init) else out
 
@@ -108,6 +108,11 @@ def kept_warp(restored: torch.Tensor, guide: torch.Tensor) -> torch.Tensor:
 def restoring_strength(restorer, config: SamplerConfig = DEFAULT) -> float:
     """The sampler's ``strength``, else the restorer's (fitted by adaptation), else 1."""
     return float(config.strength if config.strength is not None else getattr(restorer, "strength", 1.0))
+
+
+def keeps_warp(restorer, config: SamplerConfig = DEFAULT) -> bool:
+    """The sampler's ``keep_warp``, else the restorer's (chosen by adaptation), else True."""
+    return bool(config.keep_warp if config.keep_warp is not None else getattr(restorer, "keep_warp", True))
 
 
 def toward(start: torch.Tensor, restored: torch.Tensor, strength: float) -> torch.Tensor:

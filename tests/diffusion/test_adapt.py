@@ -148,6 +148,7 @@ def test_adaptation_fits_its_strength_on_frames_it_did_not_train_on(drive, tmp_p
     assert strength["fit"]["samples"] == 2  # one pair (d = 0.5) and one cycle start per held-out frame
     assert 0.0 <= strength["strength"] <= 1.0
     assert load_builtin(out / WEIGHTS).strength == pytest.approx(strength["strength"])
+    assert load_builtin(out / WEIGHTS).keep_warp is strength["keep_warp"] is strength["fit"]["keep_warp"]
     assert trained_drive(out / WEIGHTS) == drive_identity(manifest, ply)  # the rest of the record stays
     assert json.loads((out / "restorer.json").read_text())["strength"] == strength
 
@@ -156,5 +157,5 @@ def test_too_few_frames_to_hold_out_keep_the_full_strength(drive, tmp_path):
     manifest, g, ply = drive
     out = tmp_path / "adapt"
     record = adapt_restorer(manifest, g, drive_identity(manifest, ply), out, TINY, guided=True, progress=False)
-    assert record["strength"] == {"strength": 1.0, "frames": [], "fit": None}
+    assert record["strength"] == {"strength": 1.0, "keep_warp": True, "frames": [], "fit": None}
     assert list(record["config"]["holdout_frames"]) == [] and load_builtin(out / WEIGHTS).strength == 1.0

@@ -44,14 +44,15 @@ def random_pairs(path, frames=(0, 1, 2, 3), h=16, w=24, seed=0):
     return path
 
 
-def with_targets(path, pairs: PairSet, model, share: float, seed=1):
-    """Rewrite the targets as ``start + share * (restored - start)`` plus a little noise."""
+def with_targets(path, pairs: PairSet, model, share: float, seed=1, keep_warp: bool = True):
+    """Rewrite the targets as ``start + share * (restored - start)`` plus a little noise (the view
+    keeping the warp where it was seen, or not)."""
     from safetensors.numpy import load_file
 
     data = load_file(str(path))
     rng = np.random.default_rng(seed)
     for i, (left, right, start, guide, _) in enumerate(held_out_samples(pairs, guided=True)):
-        restored = restore_image(model, left, right, start, replace(SAMPLER, strength=1.0), guide)
+        restored = restore_image(model, left, right, start, replace(SAMPLER, strength=1.0, keep_warp=keep_warp), guide)
         target = (start + share * (restored - start))[0].permute(1, 2, 0).numpy()
         target = target + rng.normal(0, 0.01, target.shape)
         data["target"][i] = np.clip(np.rint(target * 255), 0, 255).astype(np.uint8)
@@ -87,6 +88,16 @@ def test_fitted_strength_is_the_least_squares_share(tmp_path, share):
     assert fit.start_psnr == pytest.approx(psnrs[0], abs=1e-6)
     assert fit.restored_psnr == pytest.approx(psnrs[-1], abs=1e-6)
     assert fit.fitted_psnr >= max(fit.start_psnr, fit.restored_psnr)
+
+
+@pytest.mark.parametrize("keep", [True, False])
+def test_the_fit_keeps_the_warp_where_the_held_out_frames_say_so(tmp_path, keep):
+    model = restorer()
+    path = random_pairs(tmp_path / "p.safetensors")
+    with_targets(path, PairSet(path), model, 0.75, keep_warp=keep)
+    fit = fit_strength(model, PairSet(path, [0, 1, 2, 3], held_out=True), SAMPLER, guided=True)
+    assert fit.keep_warp is keep and fit.fitted_psnr > fit.other_psnr
+    assert abs(fit.strength - 0.75) < 0.05
 
 
 def test_a_correction_away_from_the_truth_gets_no_strength(tmp_path):
@@ -126,6 +137,34 @@ def test_weights_carry_their_strength(tmp_path):
     save_builtin(tmp_path / "bad.safetensors", net, {"strength": 1.5})
     with pytest.raises(InputError, match="meta.strength"):
         load_builtin(tmp_path / "bad.safetensors")
+
+
+def test_weights_carry_whether_their_views_keep_the_warp(tmp_path):
+    net = restorer().net
+    save_builtin(tmp_path / "w.safetensors", net, {"strength": 0.3, "keep_warp": False})
+    assert load_builtin(tmp_path / "w.safetensors").keep_warp is False
+    save_builtin(tmp_path / "plain.safetensors", net)
+    assert load_builtin(tmp_path / "plain.safetensors").keep_warp is True
+    save_builtin(tmp_path / "bad.safetensors", net, {"keep_warp": "yes"})
+    with pytest.raises(InputError, match="meta.keep_warp"):
+        load_builtin(tmp_path / "bad.safetensors")
+
+
+def test_the_sampler_keeps_the_warp_as_the_restorer_records_unless_told():
+    model = restorer()
+    g = torch.Generator().manual_seed(0)
+    left, right, init, warp = (torch.rand(1, 3, 16, 24, generator=g) for _ in range(4))
+    mask = torch.zeros(1, 1, 16, 24)
+    mask[..., :12] = 1
+    guide = torch.cat([warp, mask], dim=1)
+    kept = restore_image(model, left, right, init, SAMPLER, guide)
+    assert torch.equal(kept[..., :12], warp[..., :12])  # seen: the warp
+    assert not torch.allclose(kept[..., 12:], warp[..., 12:], atol=1e-2)
+    model.keep_warp = False
+    free = restore_image(model, left, right, init, SAMPLER, guide)
+    assert not torch.allclose(free[..., :12], warp[..., :12], atol=1e-2)
+    assert torch.equal(free[..., 12:], kept[..., 12:])
+    assert torch.equal(restore_image(model, left, right, init, replace(SAMPLER, keep_warp=True), guide), kept)
 
 
 def test_held_out_frames_leave_training(tmp_path):

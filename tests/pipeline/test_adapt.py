@@ -78,7 +78,7 @@ def test_runs_adapt_once_and_restore_samples_with_the_adapted_weights(drive, tmp
                        progress=False)
     row = next(s for s in report["stages"] if s["name"] == "adapt")
     assert row["ran"] and not row["reused"] and row["guided"] and row["steps"] == 2
-    assert row["strength"] == {"strength": 1.0, "frames": [], "fit": None}  # too few frames to hold out
+    assert row["strength"] == {"strength": 1.0, "keep_warp": True, "frames": [], "fit": None}  # too few frames to hold out
     weights = out / row["weights"] / WEIGHTS
     assert weights.exists() and weights in loaded  # the restore stage loaded the adapted weights
     assert next(s for s in report["stages"] if s["name"] == "restore")["method"] == "geo_ar_d1.0"
