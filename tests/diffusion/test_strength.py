@@ -30,17 +30,22 @@ def restorer(seed=0) -> BuiltinRestorer:
     return BuiltinRestorer(net.eval())
 
 
-def random_pairs(path, frames=(0, 1, 2, 3), h=16, w=24, seed=0):
-    """One pair, one degraded start and one warp (left half seen) per frame, all random colour."""
+def random_pairs(path, frames=(0, 1, 2, 3), h=16, w=24, seed=0, sensor=False):
+    """One pair, one degraded start and one warp (left half seen) per frame, all random colour;
+    ``sensor``: and one pair per frame whose target a rig's second camera recorded."""
     rng = np.random.default_rng(seed)
     n = len(frames)
     img = lambda k: rng.integers(0, 256, (k, h, w, 3), dtype=np.uint8)
     mask = np.zeros((n, h, w), np.uint8)
     mask[:, :, : w // 2] = 1
     f = np.asarray(frames, np.int32)
-    save_file({"left": img(n), "target": img(n), "right": img(n), "offset": np.ones(n, np.float32), "frame": f,
-               "degraded": img(n), "degraded_frame": f, "warp": img(n), "warp_mask": mask, "warp_frame": f},
-              str(path))
+    data = {"left": img(n), "target": img(n), "right": img(n), "offset": np.ones(n, np.float32), "frame": f,
+            "degraded": img(n), "degraded_frame": f, "warp": img(n), "warp_mask": mask, "warp_frame": f}
+    if sensor:
+        data |= {"sensor_left": img(n), "sensor_target": img(n), "sensor_right": img(n),
+                 "sensor_offset": np.ones(n, np.float32), "sensor_view": np.arange(n, dtype=np.int32),
+                 "sensor_start": img(n), "sensor_warp": img(n), "sensor_warp_mask": mask, "sensor_frame": f}
+    save_file(data, str(path))
     return path
 
 
@@ -51,11 +56,13 @@ def with_targets(path, pairs: PairSet, model, share: float, seed=1, keep_warp: b
 
     data = load_file(str(path))
     rng = np.random.default_rng(seed)
-    for i, (left, right, start, guide, _) in enumerate(held_out_samples(pairs, guided=True)):
+    n = len(data["target"])
+    for i, (left, right, start, guide, _, _) in enumerate(held_out_samples(pairs, guided=True)):
         restored = restore_image(model, left, right, start, replace(SAMPLER, strength=1.0, keep_warp=keep_warp), guide)
         target = (start + share * (restored - start))[0].permute(1, 2, 0).numpy()
         target = target + rng.normal(0, 0.01, target.shape)
-        data["target"][i] = np.clip(np.rint(target * 255), 0, 255).astype(np.uint8)
+        key, k = ("target", i) if i < n else ("sensor_target", i - n)
+        data[key][k] = np.clip(np.rint(target * 255), 0, 255).astype(np.uint8)
     save_file(data, str(path))
     return path
 
@@ -63,7 +70,7 @@ def with_targets(path, pairs: PairSet, model, share: float, seed=1, keep_warp: b
 def grid_psnrs(model, pairs: PairSet, shares: np.ndarray) -> np.ndarray:
     """PSNR over all held-out pixels of the view at each share, in float64."""
     se, pixels = np.zeros(len(shares)), 0
-    for left, right, start, guide, target in held_out_samples(pairs, guided=True):
+    for left, right, start, guide, target, _ in held_out_samples(pairs, guided=True):
         r = restore_image(model, left, right, start, replace(SAMPLER, strength=1.0), guide).double().numpy()
         x, y = start.double().numpy(), target.double().numpy()
         for k, s in enumerate(shares):
@@ -91,13 +98,24 @@ def test_fitted_strength_is_the_least_squares_share(tmp_path, share):
 
 
 @pytest.mark.parametrize("keep", [True, False])
-def test_the_fit_keeps_the_warp_where_the_held_out_frames_say_so(tmp_path, keep):
+def test_a_second_cameras_held_out_pairs_choose_whether_views_keep_the_warp(tmp_path, keep):
     model = restorer()
-    path = random_pairs(tmp_path / "p.safetensors")
+    path = random_pairs(tmp_path / "p.safetensors", sensor=True)
     with_targets(path, PairSet(path), model, 0.75, keep_warp=keep)
     fit = fit_strength(model, PairSet(path, [0, 1, 2, 3], held_out=True), SAMPLER, guided=True)
-    assert fit.keep_warp is keep and fit.fitted_psnr > fit.other_psnr
+    assert fit.samples == 8 and fit.lateral_samples == 4
+    assert fit.keep_warp is keep and (fit.kept_psnr > fit.free_psnr) is keep
     assert abs(fit.strength - 0.75) < 0.05
+
+
+def test_without_lateral_truth_views_keep_the_warp(tmp_path):
+    # held out at the recorded camera the restorer is on its own ground; whether to keep the warp
+    # sideways is not what these frames can say
+    model = restorer()
+    path = random_pairs(tmp_path / "p.safetensors")
+    with_targets(path, PairSet(path), model, 0.75, keep_warp=False)
+    fit = fit_strength(model, PairSet(path, [0, 1, 2, 3], held_out=True), SAMPLER, guided=True)
+    assert fit.keep_warp is True and fit.lateral_samples == 0 and fit.kept_psnr is None and fit.free_psnr is None
 
 
 def test_a_correction_away_from_the_truth_gets_no_strength(tmp_path):
