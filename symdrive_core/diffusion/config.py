@@ -63,8 +63,8 @@ class SamplerConfig:
     # A guided restorer's view keeps the warp where the warp's mask is set: there the recorded
     # frames saw the ground, checked against depth. The restorer's correction fills the rest
     # (objects, what no frame saw); the mask's pixels still condition it. None: what the weights
-    # record (an adaptation chooses it on the drive's held-out frames, :mod:`.strength`), else
-    # True. On the built-in street the restorer's output lost 2 to 9 dB to the warp inside the
+    # record (an adaptation chooses it on held-out frames with lateral truth, :mod:`.strength`),
+    # else True. On the built-in street the restorer's output lost 2 to 9 dB to the warp inside the
     # mask (docs/results.md).
     keep_warp: bool | None = None
     # Memory for one denoiser evaluation (GiB, None: no limit): beyond it the batch of samples is

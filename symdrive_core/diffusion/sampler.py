@@ -61,7 +61,8 @@ def restore_image(
     """The centre view between ``left`` and ``right``; ``init`` seeds the start at ``n_start``;
     ``guide`` [B, 4, H, W] (warp and mask at the target camera) reaches restorers that take one.
     The result moves from ``init`` by the sampler's (or the restorer's) ``strength`` share of the
-    restorer's correction (:mod:`.strength`).
+    restorer's correction (:mod:`.strength`), and keeps the guide's warp where its mask is set
+    unless the sampler (or the restorer) says otherwise (``keep_warp``).
 
     From grey inputs the result is grey, their channel mean: nothing in them says what colour the
     view has, yet a restorer trained on colour streets paints a cast of about 1/255 and colour
