@@ -123,6 +123,11 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
                  "--geometry-guided"]) == 0
     index = json.loads((out / "restored.json").read_text())
     assert [(v["frame"], v["offset_m"]) for v in index["views"]] == [(0, -1.0), (0, 1.0), (4, -1.0), (4, 1.0)]
+    assert index["sampler"]["keep_warp"] is None  # the weights' choice
+    free = tmp_path / "views-free"
+    assert main(["restore", str(root), *common, "--out", str(free), "--offsets", "1", "--frames", "0",
+                 "--geometry-guided", "--no-keep-warp"]) == 0
+    assert json.loads((free / "restored.json").read_text())["sampler"]["keep_warp"] is False
     assert all((out / v["image"]).exists() for v in index["views"])
 
 
