@@ -99,9 +99,11 @@ def fit_strength(restorer, pairs: PairSet, sampler: SamplerConfig, *, guided: bo
         samples, lateral_samples = samples + 1, lateral_samples + from_rig
         restored = restore_image(restorer, left, right, start, full, guide)
         views = {False: restored, True: restored if guide is None else kept_warp(restored, guide)}
+        x, y = start.double(), target.double()
         for keep, view in views.items():
+            r = view.double()
             for sums in (every, lateral) if from_rig else (every,):
-                sums[keep].add(view.double(), start.double(), target.double())
+                sums[keep].add(r, x, y)
     if not every[False].pixels or every[False].norm == 0.0:
         return None
     seen = lateral[True].pixels > 0
