@@ -110,8 +110,9 @@ def add_commands(sub) -> None:
     add_external_assets_option(p)
     p.set_defaults(func=_make_pairs)
 
-    p = sub.add_parser("train-restorer", help="train the built-in restorer on a pairs file (CPU)")
-    p.add_argument("pairs", type=Path, help="pairs file from `symdrive make-pairs`")
+    p = sub.add_parser("train-restorer", help="train the built-in restorer on pairs files (CPU)")
+    p.add_argument("pairs", type=Path, nargs="+",
+                   help="pairs files from `symdrive make-pairs` (several: a family of streets, drawn as one set)")
     p.add_argument("--out", type=Path, required=True, help="folder for weights, record and checkpoint")
     add_renamed_option(p, "--iters", "--steps", type=positive_int,
                        help=f"training iterations ({_train_default('steps')})")
@@ -334,12 +335,14 @@ def _train_flux(args) -> int:
             setattr(cfg, name, getattr(args, name))
     if args.iters is not None:
         cfg.steps = args.iters
+    if len(args.pairs) > 1:
+        raise InputError("train-restorer", "--backend flux trains on one pairs file", "pairs")
     if args.lora_alpha is not None:
         cfg.alpha = args.lora_alpha
     if args.lora_targets is not None:
         cfg.targets = args.lora_targets
     cfg.gradient_checkpointing = not args.no_gradient_checkpointing
-    record = train_flux_lora(args.pairs, args.out, args.flux_transformer, args.flux_vae, args.prompt, cfg,
+    record = train_flux_lora(args.pairs[0], args.out, args.flux_transformer, args.flux_vae, args.prompt, cfg,
                              resume=args.resume, command=args.invocation, progress=not args.quiet)
     print_json({k: record[k] for k in ("steps", "final_loss", "seconds", "seconds_per_step", "peak_gpu_memory_gib",
                                        "data")})

@@ -180,9 +180,10 @@ def file_sha256(path: str | os.PathLike) -> str:
 class PairSet:
     """The pairs of one file as float tensors [N, 3, H, W] in [0, 1]; with ``holdout`` (recorded
     frames), only the pairs of the other frames, or with ``held_out`` only theirs (degraded starts
-    and warps of every frame stay: they are indexed per pair)."""
+    and warps of every frame stay: they are indexed per pair). ``warps=False`` leaves a file's
+    warps unread: an unguided restorer then starts from the cycle renders, as it was trained to."""
 
-    def __init__(self, path: str | os.PathLike, holdout=(), *, held_out: bool = False):
+    def __init__(self, path: str | os.PathLike, holdout=(), *, held_out: bool = False, warps: bool = True):
         from safetensors.numpy import load_file
 
         path = Path(path)
@@ -215,7 +216,7 @@ class PairSet:
             raise InputError(path, "degraded starts do not cover every pair's frame", "degraded_frame")
         # per pair, the index of its frame's warp (None: the file has no warps)
         self.warp = self.warp_mask = self.warp_of = None
-        if "warp" in data:
+        if warps and "warp" in data:
             if self.degraded is None:
                 raise InputError(path, "warps need degraded starts to fill what no frame saw", "warp")
             self.warp = images("warp")
@@ -311,3 +312,49 @@ class PairSet:
                 lst.append(v)
         guide = torch.stack(out[4]) if self.has_warps else None
         return (*(torch.stack(v) for v in out[:4]), guide)
+
+
+class PairFamily:
+    """The pairs of several files (a family of streets) drawn as one set. Each sample's file is
+    drawn in proportion to the pairs it holds, so every pair is as likely as in one file, and the
+    crop is the largest every file's images hold; with one file, batches are exactly its
+    :class:`PairSet`'s. The files must agree on degraded starts and warps (a batch mixes them)."""
+
+    def __init__(self, paths, holdout=(), *, warps: bool = True):
+        """``holdout``: recorded frames left out of every file; ``warps`` as :class:`PairSet`'s."""
+        paths = [Path(p) for p in paths]
+        if not paths:
+            raise ValueError("PairFamily needs at least one pairs file")
+        self.sets = [PairSet(p, holdout, warps=warps) for p in paths]
+        for kind, what in (("has_degraded", "degraded starts (make-pairs --cycle)"),
+                           ("has_warps", "warps (make-pairs --warps)")):
+            first = getattr(self.sets[0], kind)
+            odd = next((s for s in self.sets if getattr(s, kind) != first), None)
+            if odd is not None:
+                raise InputError(odd.path, f"{'has no' if first else 'has'} {what}, unlike "
+                                           f"{self.sets[0].path.name}: train on pairs files made alike")
+        self.from_sensor = torch.cat([s.from_sensor for s in self.sets])
+
+    def __len__(self) -> int:
+        return sum(len(s) for s in self.sets)
+
+    @property
+    def has_degraded(self) -> bool:
+        return self.sets[0].has_degraded
+
+    @property
+    def has_warps(self) -> bool:
+        return self.sets[0].has_warps
+
+    def batch(self, size: int, crop: int, generator: torch.Generator, degraded_fraction: float = 0.0):
+        """As :meth:`PairSet.batch`, each sample from a file drawn by its share of the pairs."""
+        if len(self.sets) == 1:
+            return self.sets[0].batch(size, crop, generator, degraded_fraction)
+        crop = min([crop, *(min(s.target.shape[-2:]) for s in self.sets if len(s))])
+        weights = torch.tensor([float(len(s)) for s in self.sets], dtype=torch.float64)
+        counts = torch.bincount(torch.multinomial(weights, size, replacement=True, generator=generator),
+                                minlength=len(self.sets)).tolist()
+        parts = [s.batch(n, crop, generator, degraded_fraction) for s, n in zip(self.sets, counts) if n]
+        guides = [p[4] for p in parts]
+        return (*(torch.cat([p[k] for p in parts]) for k in range(4)),
+                None if guides[0] is None else torch.cat(guides))

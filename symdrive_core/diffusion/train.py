@@ -35,7 +35,7 @@ from ..errors import InputError
 from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
 from .config import GUIDE_CHANNELS, TrainConfig
-from .data import PairSet, file_sha256
+from .data import PairFamily, file_sha256
 from .models import BuiltinRestorer, load_builtin, save_builtin
 from .unet import UNet, with_guide
 
@@ -107,8 +107,22 @@ def load_optimizer_tensors(opt: torch.optim.Optimizer, t: dict[str, torch.Tensor
     opt.load_state_dict(state)
 
 
+def data_record(data: PairFamily) -> dict:
+    """What the weights were trained on: each pairs file's name, SHA-256, pair counts and the
+    settings make-pairs recorded; for several files, a list of those under ``files`` and the totals."""
+    def one(s) -> dict:
+        return {"file": s.path.name, "sha256": file_sha256(s.path), "pairs": len(s),
+                "sensor_pairs": int(s.from_sensor.sum()),
+                **{k: json.loads(s.metadata[k]) for k in ("frames", "offsets", "cycle_offsets", "drive")
+                   if k in s.metadata}}
+
+    if len(data.sets) == 1:
+        return one(data.sets[0])
+    return {"files": [one(s) for s in data.sets], "pairs": len(data), "sensor_pairs": int(data.from_sensor.sum())}
+
+
 def train_restorer(
-    pairs: str | Path,
+    pairs: str | Path | list,
     out: str | Path,
     cfg: TrainConfig | None = None,
     *,
@@ -116,18 +130,20 @@ def train_restorer(
     command: str | None = None,
     progress: bool = True,
 ) -> dict:
-    """Train on ``pairs``; write ``out/restorer.safetensors`` (EMA, float16), ``out/restorer.json``
-    (config, command, data hash, steps, final loss, seconds) and ``out/checkpoint.safetensors``."""
+    """Train on ``pairs`` (a pairs file, or a list of them: a family of streets drawn as one set);
+    write ``out/restorer.safetensors`` (EMA, float16), ``out/restorer.json`` (config, command, data
+    hashes, steps, final loss, seconds) and ``out/checkpoint.safetensors``."""
     from tqdm import tqdm
 
     cfg = cfg or TrainConfig()
     out = Path(out)
     torch.set_num_threads(cfg.threads)
-    data = PairSet(pairs, cfg.holdout_frames)
+    files = [Path(p) for p in ([pairs] if isinstance(pairs, (str, Path)) else pairs)]
+    data = PairFamily(files, cfg.holdout_frames, warps=cfg.guide)
     if not len(data):
-        raise InputError(pairs, "no pairs left to train on once the held-out frames are left out")
+        raise InputError(files[0], "no pairs left to train on once the held-out frames are left out")
     if cfg.guide and not data.has_warps:
-        raise InputError(pairs, "training with the guide needs pairs with warps (`symdrive make-pairs --warps`)")
+        raise InputError(files[0], "training with the guide needs pairs with warps (`symdrive make-pairs --warps`)")
     torch.manual_seed(cfg.seed)
     net = UNet(cfg.unet())
     if cfg.init:
@@ -192,14 +208,7 @@ def train_restorer(
     record = {
         "config": {**asdict(cfg), "unet": cfg.unet().to_json()},
         "command": command,
-        "data": {
-            "file": Path(pairs).name,
-            "sha256": file_sha256(pairs),
-            "pairs": len(data),
-            "sensor_pairs": int(data.from_sensor.sum()),
-            **{k: json.loads(data.metadata[k]) for k in ("frames", "offsets", "cycle_offsets", "drive")
-               if k in data.metadata},
-        },
+        "data": data_record(data),
         "steps": done,
         "resumed_from": start,
         "final_loss": round(sum(tail) / max(len(tail), 1), 6),

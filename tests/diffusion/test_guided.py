@@ -102,6 +102,13 @@ def test_guided_batches_fill_the_warp_from_a_degraded_start_never_the_target(tmp
         assert torch.equal(start, warp) if fraction else torch.equal(start, target)
 
 
+def test_unguided_batches_of_a_file_with_warps_start_from_the_cycle_renders(tmp_path):
+    data = PairSet(guided_pairs(tmp_path / "p.safetensors"), warps=False)  # one file serves both restorers
+    assert not data.has_warps
+    left, target, right, start, guide = data.batch(16, 16, torch.Generator().manual_seed(0), 1.0)
+    assert guide is None and torch.allclose(start, torch.tensor(0.2))
+
+
 def test_guided_training_extends_unguided_init_weights(tmp_path):
     pairs = guided_pairs(tmp_path / "p.safetensors")
     cfg = TrainConfig(steps=2, batch=2, crop=16, width=8, mults=(1, 2), checkpoint_every=2)
