@@ -2,6 +2,7 @@
 is reconstructed as the built-in street is, and gives restorer training pairs.
 
     python scripts/street_family.py --out out/family --streets 8 [--first-seed 100] [--only-settings]
+    python scripts/street_family.py --out out/measure --streets 2 --first-seed 200 --measured
 
 Street k takes seed ``first_seed + k``: its layout, and from it (:func:`street_settings`) the light
 (a third overcast), the camera (height 1.4-2.0 m, pitch 1-6 degrees, a 18-32 mm lens on 36 mm, one
@@ -13,9 +14,12 @@ it stopped:
 1. ``street/``: ``scripts/make_world.py`` with 30 training frames and nothing else (no held-out
    frames, lateral truth or insertions: the pairs need only the recorded frames);
 2. ``reconstruction/``: ``symdrive reconstruct`` with the defaults (converged, as the demo street's);
-3. ``pairs.safetensors``: ``symdrive make-pairs`` from that reconstruction with the settings of
-   ``scripts/train_restorer_family.sh`` (six cycle reconstructions and the warps, so one file serves
-   both restorers).
+3. ``pairs.safetensors``: ``symdrive make-pairs`` from that reconstruction, the offsets and six
+   cycle reconstructions of ``scripts/train_restorer.sh`` and the warps (one file serves both
+   restorers).
+
+``--measured`` makes streets to measure on instead: held-out frames and the lateral truth as the
+built-in street has them, steps 1 and 2 only; give them seeds the training family does not use.
 
 The built-in street joins the family (``demo_street/pairs.safetensors``: step 3 from its shipped
 reconstruction). ``settings.json`` in each street's folder records what it drew; ``family.json``
@@ -54,10 +58,13 @@ def street_settings(seed: int) -> dict:
     }
 
 
-def world_args(s: dict, out: Path) -> list[str]:
-    """``make_world.py``'s arguments for settings ``s``: the training drive only."""
-    args = ["--out", str(out), "--seed", str(s["seed"]), "--frames", "30", "--holdout-every", "0", "--placements", "0",
-            "--offsets", "--width", str(s["width"]), "--height", str(s["height"])]
+def world_args(s: dict, out: Path, measured: bool = False) -> list[str]:
+    """``make_world.py``'s arguments for settings ``s``: the training drive only, or with
+    ``measured`` also held-out frames and the lateral truth (the built-in street's defaults)."""
+    args = ["--out", str(out), "--seed", str(s["seed"]), "--frames", "30", "--placements", "0",
+            "--width", str(s["width"]), "--height", str(s["height"])]
+    if not measured:
+        args += ["--holdout-every", "0", "--offsets"]
     for key in ("camera_height", "pitch", "lens_mm", "material_jitter", "noise", "blur", "exposure_jitter"):
         args += ["--" + key.replace("_", "-"), str(s[key])]
     return args + (["--overcast"] if s["overcast"] else [])
@@ -82,16 +89,19 @@ def make_pairs(package: Path, gaussians: Path | None, pairs: Path, log: Path) ->
                       "--warps", "--out", str(pairs), "--quiet"], log)
 
 
-def make_street(folder: Path, s: dict) -> Path:
-    """Steps 1-3 for one street (each skipped when done); returns its pairs file."""
+def make_street(folder: Path, s: dict, measured: bool = False) -> Path:
+    """Steps 1-3 for one street (each skipped when done); returns its pairs file. ``measured``:
+    a street kept out of training, with held-out frames and lateral truth, and no pairs."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "settings.json").write_text(json.dumps(s, indent=1) + "\n")
     street, recon, pairs = folder / "street", folder / "reconstruction", folder / "pairs.safetensors"
     if not (street / "manifest.json").exists():
-        run("street", [sys.executable, str(ROOT / "scripts" / "make_world.py"), *world_args(s, street)], folder / "world.log")
+        run("street", [sys.executable, str(ROOT / "scripts" / "make_world.py"), *world_args(s, street, measured)],
+            folder / "world.log")
     if not (recon / "metrics.json").exists():
         run("reconstruction", [*SYMDRIVE, "reconstruct", str(street), "--out", str(recon), "--resume", "--quiet"], folder / "reconstruct.log")
-    make_pairs(street, recon / "background.ply", pairs, folder / "pairs.log")
+    if not measured:
+        make_pairs(street, recon / "background.ply", pairs, folder / "pairs.log")
     return pairs
 
 
@@ -101,6 +111,9 @@ def main() -> int:
     ap.add_argument("--streets", type=int, default=8)
     ap.add_argument("--first-seed", type=int, default=100)
     ap.add_argument("--only-settings", action="store_true", help="print each street's settings and stop")
+    ap.add_argument("--measured", action="store_true",
+                    help="streets to measure on, kept out of training: with held-out frames and lateral truth, "
+                         "reconstructed, no pairs (use seeds the training family does not)")
     args = ap.parse_args()
     seeds = range(args.first_seed, args.first_seed + args.streets)
     if args.only_settings:
@@ -111,7 +124,9 @@ def main() -> int:
     for k, seed in enumerate(seeds):
         s = street_settings(seed)
         print(f"street {k + 1}/{args.streets} (seed {seed}): {s}", flush=True)
-        done.append({"seed": seed, "pairs": str(make_street(args.out / f"street_{seed}", s))})
+        done.append({"seed": seed, "pairs": str(make_street(args.out / f"street_{seed}", s, args.measured))})
+    if args.measured:
+        return 0
     print("built-in street", flush=True)
     make_pairs(DEMO, None, args.out / "demo_street" / "pairs.safetensors", args.out / "demo_street.log")
     done.append({"seed": None, "pairs": str(args.out / "demo_street" / "pairs.safetensors")})

@@ -36,3 +36,5 @@ def test_the_options_parse_as_make_world_reads_them():
         assert (args.width, args.height) == (s["width"], s["height"])
         for key in ("camera_height", "pitch", "lens_mm", "material_jitter", "noise", "blur", "exposure_jitter"):
             assert getattr(args, key) == s[key]
+    measured = make_world.parse_args(family.world_args(family.street_settings(200), Path("m"), measured=True))
+    assert measured.holdout_every == 5 and len(measured.offsets) == 10 and measured.placements == 0
