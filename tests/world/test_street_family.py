@@ -38,3 +38,34 @@ def test_the_options_parse_as_make_world_reads_them():
             assert getattr(args, key) == s[key]
     measured = make_world.parse_args(family.world_args(family.street_settings(200), Path("m"), measured=True))
     assert measured.holdout_every == 5 and len(measured.offsets) == 10 and measured.placements == 0
+
+
+def test_a_stopped_family_continues_where_it_stopped(tmp_path, monkeypatch):
+    ran = []
+
+    def fake_run(label, cmd, log):  # each step writes the output its skip test looks for
+        ran.append(label)
+        out = Path(cmd[cmd.index("--out") + 1])
+        marker = {"street": out / "manifest.json", "reconstruction": out / "metrics.json", "pairs": out}[label]
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text("{}")
+
+    monkeypatch.setattr(family, "run", fake_run)
+    s = family.street_settings(100)
+    pairs = family.make_street(tmp_path / "street_100", s)
+    assert ran == ["street", "reconstruction", "pairs"] and pairs.exists()
+    (tmp_path / "street_100" / "reconstruction" / "metrics.json").unlink()  # stopped during its fit
+    pairs.unlink()
+    ran.clear()
+    family.make_street(tmp_path / "street_100", s)
+    assert ran == ["reconstruction", "pairs"]
+    ran.clear()
+    family.make_street(tmp_path / "street_100", s)
+    assert ran == []
+    family.make_street(tmp_path / "measured", family.street_settings(200), measured=True)
+    assert ran == ["street", "reconstruction"]  # streets to measure on get no pairs
+
+
+def test_a_failed_step_stops_the_family_naming_its_log(tmp_path):
+    with pytest.raises(SystemExit, match=r"reconstruction failed \(exit 3\): see .*step\.log"):
+        family.run("reconstruction", [sys.executable, "-c", "import sys; sys.exit(3)"], tmp_path / "step.log")
