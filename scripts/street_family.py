@@ -43,11 +43,12 @@ DEMO = ROOT / "symdrive_core" / "data" / "demo_street"
 SIZES = ((256, 144), (320, 176), (288, 128))  # width, height: the built-in street's and two others
 OFFSETS = "0.5,1,1.5,2,2.5,3"
 CYCLE = "-3,-2,-1,1,2,3"
+SETTINGS_STREAM = 43  # the settings draw from (seed, this): a stream apart from the layout's, which is the seed's
 
 
 def street_settings(seed: int) -> dict:
     """What street ``seed`` varies, drawn from the seed alone (the same seed, the same street)."""
-    rng = np.random.default_rng([seed, 43])
+    rng = np.random.default_rng([seed, SETTINGS_STREAM])
     width, height = SIZES[int(rng.integers(len(SIZES)))]
     return {
         "seed": seed, "overcast": bool(rng.random() < 1 / 3),
@@ -99,7 +100,8 @@ def make_street(folder: Path, s: dict, measured: bool = False) -> Path:
         run("street", [sys.executable, str(ROOT / "scripts" / "make_world.py"), *world_args(s, street, measured)],
             folder / "world.log")
     if not (recon / "metrics.json").exists():
-        run("reconstruction", [*SYMDRIVE, "reconstruct", str(street), "--out", str(recon), "--resume", "--quiet"], folder / "reconstruct.log")
+        run("reconstruction", [*SYMDRIVE, "reconstruct", str(street), "--out", str(recon), "--resume", "--quiet"],
+            folder / "reconstruct.log")
     if not measured:
         make_pairs(street, recon / "background.ply", pairs, folder / "pairs.log")
     return pairs
@@ -115,6 +117,7 @@ def main() -> int:
                     help="streets to measure on, kept out of training: with held-out frames and lateral truth, "
                          "reconstructed, no pairs (use seeds the training family does not)")
     args = ap.parse_args()
+    out = args.out.resolve()  # the steps run from the repository's root
     seeds = range(args.first_seed, args.first_seed + args.streets)
     if args.only_settings:
         for seed in seeds:
@@ -124,14 +127,14 @@ def main() -> int:
     for k, seed in enumerate(seeds):
         s = street_settings(seed)
         print(f"street {k + 1}/{args.streets} (seed {seed}): {s}", flush=True)
-        done.append({"seed": seed, "pairs": str(make_street(args.out / f"street_{seed}", s, args.measured))})
+        done.append({"seed": seed, "pairs": str(make_street(out / f"street_{seed}", s, args.measured))})
     if args.measured:
         return 0
     print("built-in street", flush=True)
-    make_pairs(DEMO, None, args.out / "demo_street" / "pairs.safetensors", args.out / "demo_street.log")
-    done.append({"seed": None, "pairs": str(args.out / "demo_street" / "pairs.safetensors")})
-    (args.out / "family.json").write_text(json.dumps({"streets": done}, indent=1) + "\n")
-    print("wrote", args.out / "family.json")
+    make_pairs(DEMO, None, out / "demo_street" / "pairs.safetensors", out / "demo_street.log")
+    done.append({"seed": None, "pairs": str(out / "demo_street" / "pairs.safetensors")})
+    (out / "family.json").write_text(json.dumps({"streets": done}, indent=1) + "\n")
+    print("wrote", out / "family.json")
     return 0
 
 
