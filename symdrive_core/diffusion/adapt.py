@@ -89,16 +89,18 @@ def weights_meta(weights: str | Path) -> dict:
         return json.loads((f.metadata() or {}).get("meta", "{}"))
 
 
-def trained_drive(weights: str | Path) -> dict | None:
-    """The drive ``weights`` were trained on, from their metadata (None: not recorded)."""
+def trained_drives(weights: str | Path) -> list[dict]:
+    """The drives ``weights`` were trained on, from their metadata: the one of a single pairs file,
+    or each of a family's files (``[]``: not recorded)."""
     from safetensors import SafetensorError
 
     try:
         meta = weights_meta(weights)
     except (OSError, SafetensorError, json.JSONDecodeError):
-        return None
-    drive = meta.get("data", {}).get("drive") if isinstance(meta, dict) else None
-    return drive if isinstance(drive, dict) else None
+        return []
+    data = meta.get("data", {}) if isinstance(meta, dict) else {}
+    records = data.get("files", [data]) if isinstance(data, dict) else []
+    return [r["drive"] for r in records if isinstance(r, dict) and isinstance(r.get("drive"), dict)]
 
 
 def adapt_restorer(manifest, gaussians, drive: dict, out: str | Path, config: AdaptConfig = AdaptConfig(), *,

@@ -229,7 +229,7 @@ def run_cameras(manifest: Manifest, names: tuple[str, ...] | None) -> list[str]:
 
 def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: bool) -> StageDecision:
     """Fine-tune the restorer on this drive's own pairs when its weights record another drive."""
-    from ..diffusion.adapt import drive_identity, shipped_weights, trained_drive
+    from ..diffusion.adapt import drive_identity, shipped_weights, trained_drives
     from ..scene.ground_truth import split_frames, truth_camera
 
     if not restores:
@@ -246,10 +246,12 @@ def _adapt(manifest: Manifest, opt: PlanOptions, restores: bool, reconstructs: b
     if not manifest.background_splats:
         return StageDecision("adapt", False, "no reconstruction to render training pairs from")
     drive = drive_identity(manifest, manifest.resolve(manifest.background_splats))
-    seen = trained_drive(shipped_weights(guided=True))
-    if seen is not None and seen.get("identity") == drive["identity"]:
+    seen = trained_drives(shipped_weights(guided=True))
+    if any(d.get("identity") == drive["identity"] for d in seen):
         return StageDecision("adapt", False, f"the restorer was trained on this drive ({drive['identity']})")
-    trained_on = f"{seen.get('scene')!r} ({seen.get('identity')})" if seen else "an unrecorded drive"
+    trained_on = (f"{seen[0].get('scene')!r} ({seen[0].get('identity')})" if len(seen) == 1
+                  else f"{len(seen)} drives ({', '.join(repr(d.get('scene')) for d in seen)})" if seen
+                  else "an unrecorded drive")
     return StageDecision("adapt", True, f"the restorer was trained on {trained_on}, not on this drive "
                          f"({drive['identity']})", train)
 

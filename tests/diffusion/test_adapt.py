@@ -12,7 +12,7 @@ from safetensors import safe_open
 
 from symdrive_core.cli import main
 from symdrive_core.diffusion import defaults
-from symdrive_core.diffusion.adapt import AdaptConfig, adapt_restorer, drive_identity, trained_drive
+from symdrive_core.diffusion.adapt import AdaptConfig, adapt_restorer, drive_identity, trained_drives
 from symdrive_core.diffusion.models import load_builtin, load_restorer
 from symdrive_core.diffusion.sampler import SamplerConfig, restore_image, to_numpy, to_tensor
 from symdrive_core.diffusion.train import WEIGHTS, TrainConfig, train_restorer
@@ -40,7 +40,7 @@ def test_adapted_weights_record_the_drive_and_are_reused(drive, tmp_path):
     out = tmp_path / "adapt"
     record = adapt_restorer(manifest, g, identity, out, TINY, guided=True, progress=False)
     assert not record["reused"] and record["steps"] == 3
-    assert trained_drive(out / WEIGHTS) == identity
+    assert trained_drives(out / WEIGHTS) == [identity]
     with safe_open(str(out / "pairs.safetensors"), "np") as f:  # training frames only, with warps
         assert set(f.keys()) >= {"warp", "degraded"}
         assert json.loads(f.metadata()["frames"]) == manifest.ground_truth["train_frames"]
@@ -68,7 +68,7 @@ def test_shipped_weights_record_the_built_in_street():
     """The planner skips adaptation on the street the shipped weights were trained on."""
     demo = load_manifest(DEMO_PACKAGE)
     street = drive_identity(demo, demo.resolve(demo.background_splats))
-    assert trained_drive(defaults.GUIDED_WEIGHTS) == trained_drive(defaults.DEFAULT_WEIGHTS) == street
+    assert street in trained_drives(defaults.GUIDED_WEIGHTS) and street in trained_drives(defaults.DEFAULT_WEIGHTS)
 
 
 def test_training_stops_at_its_time_budget(tmp_path):
@@ -149,7 +149,7 @@ def test_adaptation_fits_its_strength_on_frames_it_did_not_train_on(drive, tmp_p
     assert 0.0 <= strength["strength"] <= 1.0
     assert load_builtin(out / WEIGHTS).strength == pytest.approx(strength["strength"])
     assert load_builtin(out / WEIGHTS).keep_warp is strength["keep_warp"] is strength["fit"]["keep_warp"]
-    assert trained_drive(out / WEIGHTS) == drive_identity(manifest, ply)  # the rest of the record stays
+    assert trained_drives(out / WEIGHTS) == [drive_identity(manifest, ply)]  # the rest of the record stays
     assert json.loads((out / "restorer.json").read_text())["strength"] == strength
 
 

@@ -33,12 +33,14 @@ def drive(synthetic_package):  # noqa: F811
     return root
 
 
-def stamped_weights(path, drive: dict):
-    """A copy of the shipped guided weights whose metadata says they were trained on ``drive``."""
+def stamped_weights(path, drive: dict | None = None, family: list[dict] | None = None):
+    """A copy of the shipped guided weights whose metadata says they were trained on ``drive``, or
+    on a family of pairs files, one per drive of ``family``."""
     with safe_open(str(defaults.GUIDED_WEIGHTS), "np") as f:
         meta, tensors = dict(f.metadata()), {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118
     inner = json.loads(meta["meta"])
-    inner["data"]["drive"] = drive
+    inner["data"] = ({"drive": drive} if family is None else
+                     {"files": [{"file": f"street_{i}.safetensors", "drive": d} for i, d in enumerate(family)]})
     save_file(tensors, str(path), metadata={**meta, "meta": json.dumps(inner)})
     return path
 
@@ -54,6 +56,16 @@ def test_the_plan_adapts_only_a_restorer_trained_on_another_drive(drive, make_pa
                                                                     drive_identity(m, drive / "bg.ply")))
     skip = make_plan(m).stage("adapt")
     assert not skip.run and "trained on this drive" in skip.reason
+    monkeypatch.undo()
+
+    others = [{"scene": f"street-{i}", "identity": f"{i:016x}"} for i in range(3)]
+    monkeypatch.setattr(defaults, "GUIDED_WEIGHTS", stamped_weights(tmp_path / "family.safetensors", family=others))
+    unseen = make_plan(m).stage("adapt")
+    assert unseen.run and "3 drives ('street-0', 'street-1', 'street-2')" in unseen.reason
+    family = [*others, drive_identity(m, drive / "bg.ply")]
+    monkeypatch.setattr(defaults, "GUIDED_WEIGHTS", stamped_weights(tmp_path / "family.safetensors", family=family))
+    member = make_plan(m).stage("adapt")  # one of the family's drives
+    assert not member.run and "trained on this drive" in member.reason
     monkeypatch.undo()
 
     demo = make_plan(load_manifest(DEMO_PACKAGE)).stage("adapt")  # the street the shipped weights learnt
