@@ -102,6 +102,17 @@ def unit_fraction(value: str) -> float:
     return x
 
 
+def angle_deg(value: str) -> float:
+    """An angle from 0 to 90 degrees (a size seen from afar)."""
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of degrees, got {value!r}") from None
+    if not 0.0 <= x <= 90.0:
+        raise argparse.ArgumentTypeError(f"must be from 0 to 90 degrees, got {value}")
+    return x
+
+
 def _int_at_least(value: str, low: int) -> int:
     try:
         n = int(value)

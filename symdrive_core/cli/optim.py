@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..optim.config import COARSE_TO_FINE, ReconstructConfig
-from . import add_quiet_option, count_int, default_of, given, positive_int, unit_fraction
+from . import add_quiet_option, angle_deg, count_int, default_of, given, positive_int, unit_fraction
 
 
 def resolution_schedule_arg(text: str) -> tuple[float, ...] | None:
@@ -56,6 +56,11 @@ def add_commands(sub) -> None:
                    help="in views without depth (SfM-only drives), start the sky dome above the horizon and the "
                         "skyline the point cloud draws in each view; off: only where a dense depth map marks the sky "
                         f"(default {'on' if ReconstructConfig().sky.skyline else 'off'})")
+    p.add_argument("--sensor-dome-deg", type=angle_deg, metavar="DEG",
+                   help="where the depth is a sensor's (LiDAR), start the sky dome above the horizon and the returns' "
+                        "skyline as broad Gaussians of this size (one standard deviation, degrees) that keep their places "
+                        "and sizes; 0: no dome there "
+                        f"(default {default_of(ReconstructConfig, 'sky.sensor_dome_deg')})")
     p.add_argument("--max-gaussians", type=positive_int,
                    help=f"cap for densification (default {default_of(ReconstructConfig, 'densify.max_gaussians')})")
     p.add_argument("--densify-until", type=unit_fraction, metavar="F",
@@ -94,7 +99,7 @@ def _reconstruct(args) -> int:
                                     densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
-    cfg.sky = replace(cfg.sky, **given(args, skyline="sky_skyline"))
+    cfg.sky = replace(cfg.sky, **given(args, "sensor_dome_deg", skyline="sky_skyline"))
     if args.static:
         cfg.decompose = False
     if args.lateral:  # checked before hours of fitting, not after

@@ -36,12 +36,15 @@ def _mean(values) -> float | None:
 
 
 def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
-                           frames: list[int] | None = None, shadows: dict | None = None) -> dict:
+                           frames: list[int] | None = None, shadows: dict | None = None,
+                           masks: dict[int, np.ndarray] | None = None) -> dict:
     """Held-out frames: PSNR over the image, over the moving vehicles' pixels and elsewhere (the
-    truth's vehicle masks), the recorded vehicles at their recorded poses with their ``shadows``
+    truth's vehicle masks, or ``masks``: boolean images by frame, where a real drive's labels
+    put its moving vehicles), the recorded vehicles at their recorded poses with their ``shadows``
     (shadow layers, by actor id)."""
-    require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
-    masks = vehicle_masks(manifest)
+    if masks is None:
+        require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
+        masks = {f: read_mask(manifest.resolve(path)) > 0.5 for f, path in vehicle_masks(manifest).items()}
     frames = [f for f in (split_frames(manifest)[1] if frames is None else frames) if f in masks]
     cam = manifest.cameras[0]
     renderer = TrafficRenderer(background, actors, shadows)
@@ -49,7 +52,7 @@ def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: di
     for f in frames:
         rgb, _ = renderer.render(manifest, cam.name, f, recorded=True)
         truth = read_image(manifest.resolve(cam.frames[f].image), channels=3)
-        vehicles = read_mask(manifest.resolve(masks[f])) > 0.5
+        vehicles = masks[f]
         rows["image"].append(float(psnr(rgb, truth)))
         rows["vehicles"].append(_masked(rgb, truth, vehicles))
         rows["elsewhere"].append(_masked(rgb, truth, ~vehicles))

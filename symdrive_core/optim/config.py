@@ -40,13 +40,20 @@ class PoseRefineConfig:
 class SkyConfig:
     """Where the sky dome starts in a view without depth (:mod:`.sky`)."""
 
-    # The sky estimated above the horizon and the point cloud's skyline; off: no dome where no
-    # depth marks the sky (sparse sensor depth never gets one: its scanner sees no building's top).
+    # Without depth, the sky estimated above the horizon and the point cloud's skyline; off: no
+    # dome where no depth marks the sky (sparse sensor depth: ``sensor_dome_deg``).
     skyline: bool = True
     min_elevation_deg: float = 1.0  # a sky ray is at least this far above the horizon
     cell_px: int = 8  # the skyline's resolution in pixels, both ways
     neighbour_cells: int = 1  # a column's skyline is the highest over this many columns each side
     margin_cells: int = 0  # the sky starts this many cells above the skyline
+    # Sparse sensor depth (a LiDAR's) marks no sky and its returns stop at the scanner's top beam, so
+    # there the dome starts above the horizon and the returns' skyline, as broad Gaussians (one
+    # standard deviation this many degrees, seen from the dome's centre) that keep their places and
+    # sizes and never densify: a part of the fit of its own, written into the background at the end.
+    # They draw the sky's smooth colours but not the upper storeys the scanner missed, which the
+    # street's Gaussians must grow to draw. 0: no dome where the depth is a sensor's.
+    sensor_dome_deg: float = 5.0
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """3DGS reconstruction of a scene package's background from its training drive, on the CPU.
 
 Kerbl et al.'s recipe at small scale: Gaussians initialised from the package's coloured point
-cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can explain them),
+cloud (plus a far "sky dome" seeded from the sky pixels, since nothing else can explain them; where
+the depth is a sensor's, a dome of broad Gaussians fixed in place, fitted as a part of its own),
 trained with L1 + 0.2 (1 - SSIM) (+ an optional inverse-depth L1 against the package's depth
 maps at their measured pixels only, so sparse LiDAR depth supervises where it has returns), Adam
 with per-parameter learning rates and an exponentially decaying position rate, SH degree raised
@@ -46,6 +47,9 @@ from .views import Levels, View, cameras_left_out, load_views, training_cameras
 
 SHADOW_SUFFIX = ".shadow.safetensors"  # a recorded vehicle's shadow layer, beside its actors/<id>.ply
 SKY_DISTANCE_FACTOR = 8.0  # sky dome radius, in scene extents (at least 150 m)
+FIXED_GEOMETRY = ("means", "quats", "log_scales")  # what a fixed part does not learn
+# A part that only prunes what turns transparent: no clone, no split, any size
+FIXED_DENSIFY = DensifyConfig(grad_threshold=float("inf"), max_angular_size=float("inf"))
 
 
 # ------------------------------------------------------------------ parameters
@@ -95,6 +99,33 @@ def sky_points(views: list[View], n: int, radius: float, rng: np.random.Generato
     return pts[idx].astype(np.float32), cols[idx].astype(np.float32)
 
 
+def sensor_dome(manifest: Manifest, views: list[View], cfg: ReconstructConfig) -> Gaussians | None:
+    """The broad dome of views whose depth is a sensor's (``SkyConfig.sensor_dome_deg``): Gaussians
+    on the dome along their pixels above the horizon and the skyline of the package's points (the
+    scanner's returns), each one standard deviation ``sensor_dome_deg`` across; None where no such
+    view or no such pixel."""
+    sensor = [replace(v, depth=None) for v in views if v.depth is not None and bool(torch.isnan(v.depth).any())]
+    if not sensor or cfg.sky.sensor_dome_deg <= 0 or manifest.background_points is None:
+        return None
+    cloud, _ = read_points(manifest.resolve(manifest.background_points))
+    radius = dome_radius(views)
+    pts, cols = sky_points(sensor, cfg.sky_points, radius, np.random.default_rng(cfg.seed), cloud, cfg.sky)
+    if not len(pts):
+        return None
+    n = len(pts)
+    size = radius * np.tan(np.radians(cfg.sky.sensor_dome_deg))
+    return Gaussians(
+        means=pts, quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        log_scales=np.full((n, 3), np.log(size), np.float32),
+        opacity_logits=np.full(n, np.log(cfg.init_opacity / (1 - cfg.init_opacity)), np.float32),
+        sh=rgb_to_sh_dc(cols)[:, None, :].astype(np.float32))
+
+
+def dome_radius(views: list[View]) -> float:
+    """The sky dome's radius: ``SKY_DISTANCE_FACTOR`` scene extents, at least 150 m."""
+    return max(SKY_DISTANCE_FACTOR * scene_extent(views)[0], 150.0)
+
+
 def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 2048) -> np.ndarray:
     """Root mean squared distance to the k nearest neighbours (the 3DGS initial scale)."""
     p = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
@@ -121,9 +152,7 @@ def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructCon
     if len(pts) > cfg.max_init_points:
         keep = np.sort(rng.choice(len(pts), cfg.max_init_points, replace=False))
         pts, cols = pts[keep], cols[keep]
-    extent, _ = scene_extent(views)
-    far = max(SKY_DISTANCE_FACTOR * extent, 150.0)
-    sp, sc = sky_points(views, cfg.sky_points, far, rng, pts if cfg.sky.skyline else None, cfg.sky)
+    sp, sc = sky_points(views, cfg.sky_points, dome_radius(views), rng, pts if cfg.sky.skyline else None, cfg.sky)
     pts, cols = np.concatenate([pts, sp]), np.concatenate([cols, sc])
     n = len(pts)
     scale = knn_scale(pts)
@@ -225,6 +254,7 @@ class Part:
     instance_id: int = 0
     half: np.ndarray | None = None  # a vehicle's box half extents (x length, y width, z height)
     refine: pose_refine.PoseRefinement | None = None  # a tracked vehicle's learnt pose corrections
+    fixed: bool = False  # places, sizes and orientations stay as started (the sensor dome): colours and opacities learn
 
     @staticmethod
     def start(name: str, initial: Gaussians | None, cfg: ReconstructConfig, extent: float, centre: torch.Tensor,
@@ -237,7 +267,12 @@ class Part:
         else:
             params = params_from_gaussians(initial, cfg.sh_degree)
             opt, stats, it = make_optimizer(params, cfg, extent), GradStats(len(params["means"])), 0
-        return Part(name, params, opt, stats, extent, centre, densify, checkpoint, **placement), it
+        part = Part(name, params, opt, stats, extent, centre, densify, checkpoint, **placement)
+        if part.fixed:
+            for group in opt.param_groups:
+                if group["name"] in FIXED_GEOMETRY:
+                    group["lr"] = 0.0
+        return part, it
 
     def present(self, frame: int) -> bool:
         return self.poses is None or self.poses[frame] is not None
@@ -303,7 +338,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         view = levels.at(factor)[order[pos]]
         for part in parts:
             for group in part.opt.param_groups:
-                if group["name"] == "means":
+                if group["name"] == "means" and not part.fixed:
                     group["lr"] = position_lr(cfg, part.extent, it)
         degree = cfg.sh_degree_at(it)
         rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
@@ -452,6 +487,7 @@ class Fit:
     extent: float
     shadows: RecordedShadows | None = None  # the recorded vehicles' shadows, where the scene has a sun
     exposure: Exposure | None = None  # the cameras' colour transforms, where more than one trains
+    sky: Part | None = None  # the sensor dome (one of ``parts``), where the depth is a sensor's
 
     @staticmethod
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
@@ -465,14 +501,20 @@ class Fit:
         tracks = decompose.tracks(manifest) if cfg.decompose else []
         tracks, refine = pose_refine.refinements(manifest, tracks, cfg)
         checkpoint = None if out is None else Checkpoint(out / "checkpoint")
-        initial = None
+        initial = dome = None
         if not (resume and checkpoint is not None and checkpoint.exists()):
             initial = initial_gaussians(manifest, views, cfg)
+            dome = sensor_dome(manifest, views, cfg)
             if tracks:  # points on a moving car are smeared along its path: the vehicle's part explains them
                 initial = initial.subset(~decompose.in_swept_boxes(initial.means, tracks))
         extent, centre = scene_extent(views)
         background, start = Part.start("background", initial, cfg, extent, centre, cfg.densify, checkpoint, resume)
-        parts = [background, *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
+        sky = None
+        sky_checkpoint = None if out is None else Checkpoint(out / "checkpoint" / "sky")
+        if dome is not None or (resume and sky_checkpoint is not None and sky_checkpoint.exists()):
+            sky, _ = Part.start("sky", dome, cfg, extent, centre, FIXED_DENSIFY, sky_checkpoint, resume, fixed=True)
+        parts = [background, *([sky] if sky else []),
+                 *actor_parts(tracks, views, cfg, out, resume, np.random.default_rng(cfg.seed), refine)]
         # the depth maps seeded the sky; the loss reads those of the cameras it weighs
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
@@ -481,7 +523,7 @@ class Fit:
             for extra in (x for x in (shadows, exposure) if x is not None):
                 extra.resume(checkpoint.folder)
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
-                   extent, shadows, exposure)
+                   extent, shadows, exposure, sky)
 
     def train(self, until: int | None = None, progress: bool = True) -> dict:
         """Train to iteration ``until`` (default: the end); :func:`fit_parts`' log."""
@@ -491,8 +533,12 @@ class Fit:
         return log
 
     def gaussians(self) -> tuple[Gaussians, dict[str, Gaussians]]:
-        """(background, recorded vehicles by actor id, each in its own frame) as they stand."""
-        return self.parts[0].gaussians(), {p.name: p.gaussians() for p in self.parts[1:]}
+        """(background, with the sensor dome where there is one; recorded vehicles by actor id, each
+        in its own frame) as they stand."""
+        background = self.parts[0].params
+        if self.sky is not None:
+            background = {k: torch.cat([v.detach(), self.sky.params[k].detach()]) for k, v in background.items()}
+        return gaussians_from_params(background), {p.name: p.gaussians() for p in self.parts[1:] if p is not self.sky}
 
     def layers(self) -> dict[str, ShadowLayer]:
         """The recorded vehicles' shadow layers as they stand, by actor id (none without a sun)."""

@@ -8,10 +8,12 @@ in each column of cells, the highest cell a point lands on, as seen over the nei
 (a wall without texture between two textured ones is not sky). A column no point lands on is sky
 down to the horizon.
 
-Sparse sensor depth gets no estimate: a scanner sees nothing above its top beam (KITTI's: 2
-degrees above the horizon), so the upper storeys of every building would pass for sky and be
-painted on the dome; measured, that cost 0.8 dB of held-out PSNR (docs/results.md, "A sky where
-the depth does not mark it").
+Sparse sensor depth marks no sky itself: its gaps are unmeasured. A scanner sees nothing above
+its top beam (KITTI's: 2 degrees above the horizon), so the skyline its returns draw lets the
+upper storeys of every building pass for sky; a dome of ordinary Gaussians started there painted
+them and cost 0.8 dB of held-out PSNR. The reconstruction therefore starts that dome from the
+same estimate (the depth left out) as broad Gaussians that keep their places and sizes
+(``SkyConfig.sensor_dome_deg``; docs/results.md, "A sky where the depth does not mark it").
 """
 
 from __future__ import annotations

@@ -86,3 +86,45 @@ def test_the_traffic_script_writes_its_table_and_figure(traffic_truth, tmp_path)
     result = json.loads(out.read_text())
     assert result["heldout"]["decomposed"]["frames"] == 4 and set(result["edits"]) == {"remove", "move"}
     assert read_image(figure, channels=3).shape == (m.cameras[0].height, 5 * m.cameras[0].width + 16, 3)
+
+
+def test_a_real_drives_label_boxes_score_its_moving_vehicles(traffic_truth, tmp_path):
+    """``eval_tracked_drive.py``: the labels' 2D boxes (drawn on images twice the package's size)
+    become the moving vehicles' pixels, the bounding rectangles of the truth's masks, and each fit is
+    scored over them as :func:`evaluate_decomposition` scores with those masks."""
+    from symdrive_core.io.images import read_mask
+    from tests.scripts import load_script
+
+    m, decomposed = traffic_truth
+    truth = {int(f): read_mask(m.resolve(p)) > 0.5 for f, p in m.ground_truth["vehicles"]["frames"].items()}
+    lines, rects = [], {}
+    for f, mask in truth.items():
+        if not mask.any():
+            continue
+        ys, xs = np.nonzero(mask)
+        rects[f] = np.zeros_like(mask)
+        rects[f][ys.min():ys.max() + 1, xs.min():xs.max() + 1] = True
+        # KITTI's pixels at twice the size: package pixel j covers label pixels 2j and 2j + 1
+        lines.append(f"{f} 1 Car 0 0 0 {2 * xs.min()} {2 * ys.min()} {2 * xs.max() + 1} {2 * ys.max() + 1} 1 1 1 0 0 0 0")
+    lines.append(f"{min(rects)} 7 Car 0 0 0 0 0 5 5 1 1 1 0 0 0 0")  # a vehicle that is no actor of the package
+    labels = tmp_path / "0001.txt"
+    labels.write_text("\n".join(lines) + "\n")
+    script = load_script("eval_tracked_drive")
+    assert script.moving_tracks(m, 2.0) == ["car_1"]
+    shape, size = (m.cameras[0].height, m.cameras[0].width), (2 * m.cameras[0].width, 2 * m.cameras[0].height)
+    masks = script.label_masks(labels, ["1"], shape, size)
+    assert set(masks) == set(rects) and all(np.array_equal(masks[f], rects[f]) for f in rects)
+    # the script names tracks as ``import tracks`` does: the box as actor ``track_1``
+    root = tmp_path / "pkg"
+    shutil.copytree(m.root, root)
+    (root / "manifest.json").write_text((root / "manifest.json").read_text().replace('"car_1"', '"track_1"'))
+    for path in (root / "reconstruction/actors").glob("car_1.*"):
+        path.rename(path.with_name(path.name.replace("car_1", "track_1")))
+    out = tmp_path / "tracked.json"
+    assert script.main([str(root), str(labels), "--fit", f"decomposed={root / 'reconstruction'}",
+                        "--label-size", *map(str, size), "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["moving"] == ["track_1"]
+    assert result["decomposed"] == evaluate_decomposition(m, decomposed.gaussians, decomposed.actors, masks=rects)
+    assert result["decomposed"]["psnr_vehicles"] != evaluate_decomposition(m, decomposed.gaussians,
+                                                                          decomposed.actors)["psnr_vehicles"]

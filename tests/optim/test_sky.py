@@ -97,7 +97,7 @@ def test_the_dome_starts_on_the_estimated_sky_only():
     assert len(sky_points([view], 500, 100.0, rng, None)[0]) == 0  # no cloud, no depth: no sky claimed
 
 
-def test_the_command_line_turns_the_skyline_off_and_leaves_it_on_by_default(synthetic_package, monkeypatch):
+def test_the_command_line_turns_the_skyline_and_the_sensor_dome_off_and_leaves_them_on_by_default(synthetic_package, monkeypatch):
     import pytest
 
     from symdrive_core.cli import main
@@ -109,11 +109,15 @@ def test_the_command_line_turns_the_skyline_off_and_leaves_it_on_by_default(synt
         pass
 
     def stop(manifest, out, cfg, **kwargs):
-        seen.append(cfg.sky.skyline)
+        seen.append((cfg.sky.skyline, cfg.sky.sensor_dome_deg))
         raise Stop
 
     monkeypatch.setattr(reconstruct, "reconstruct", stop)
-    for extra in ([], ["--no-sky-skyline"]):
+    for extra in ([], ["--no-sky-skyline"], ["--sensor-dome-deg", "0"]):
         with pytest.raises(Stop):
             main(["reconstruct", str(synthetic_package[0]), "--quiet", *extra])
-    assert seen == [SkyConfig().skyline, False] and SkyConfig().skyline
+    default = SkyConfig()
+    assert seen == [(default.skyline, default.sensor_dome_deg), (False, default.sensor_dome_deg), (default.skyline, 0.0)]
+    assert default.skyline and default.sensor_dome_deg > 0
+    with pytest.raises(SystemExit):  # an angle below 0 is no size
+        main(["reconstruct", str(synthetic_package[0]), "--sensor-dome-deg", "-1"])

@@ -104,3 +104,42 @@ def test_lidar_depth_turns_the_depth_loss_on_by_default(sparse_package, syntheti
         assert cfg.depth_weight_for(load_manifest(root).cameras[0]) == expected
         result = reconstruct(load_manifest(root), tmp_path / str(k), cfg, progress=False)
         assert result.metrics["depth_weight"] == expected
+
+
+def test_a_sensors_depth_gets_a_broad_dome_that_keeps_its_places_and_sizes(sparse_package, tmp_path):
+    """Sparse sensor depth: the dome starts above the horizon and the points' skyline as broad
+    Gaussians (one standard deviation ``sensor_dome_deg`` across), which keep their places and sizes
+    through the fit and its resumption, learn their colours, and end in the background."""
+    from dataclasses import replace
+
+    from symdrive_core.io.points import write_points
+    from symdrive_core.optim.config import SkyConfig
+    from symdrive_core.optim.reconstruct import dome_radius, sensor_dome
+
+    root = tmp_path / "pkg"  # a scanner's returns stop at its top beam: none above 2.5 m
+    shutil.copytree(sparse_package, root)
+    pts, cols = read_points(root / "points.ply")
+    write_points(root / "points.ply", pts[pts[:, 2] < 2.5], cols[pts[:, 2] < 2.5])
+    m = load_manifest(root)
+    views = load_views(m, split_frames(m)[0])
+    cfg = ReconstructConfig(iters=40, densify_from=10, densify_every=10, checkpoint_every=20, sky_points=300,
+                            sh_degree=0)
+    dome = sensor_dome(m, views, cfg)
+    assert dome is not None and 0 < len(dome) <= 300
+    radius = dome_radius(views)
+    np.testing.assert_allclose(dome.scales, radius * np.tan(np.radians(cfg.sky.sensor_dome_deg)), rtol=1e-5)
+    assert sensor_dome(m, views, replace(cfg, sky=SkyConfig(sensor_dome_deg=0.0))) is None
+    m.cameras[0].depth_zero = "sky"  # dense depth marks its own sky: no sensor dome
+    assert sensor_dome(m, load_views(m, split_frames(m)[0]), cfg) is None
+
+    m = load_manifest(root)
+    reconstruct(m, tmp_path / "fit", replace(cfg, iters=20), progress=False)
+    result = reconstruct(m, tmp_path / "fit", cfg, resume=True, progress=False)
+    started = {tuple(p): i for i, p in enumerate(dome.means)}
+    kept = [(j, started[tuple(p)]) for j, p in enumerate(result.gaussians.means) if tuple(p) in started]
+    assert len(kept) > 0.5 * len(dome)  # what stayed is where it started, as large, and coloured anew
+    j, i = map(list, zip(*kept))
+    np.testing.assert_array_equal(result.gaussians.log_scales[j], dome.log_scales[i])
+    np.testing.assert_array_equal(result.gaussians.quats[j], dome.quats[i])
+    assert not np.array_equal(result.gaussians.sh[j], dome.sh[i])
+    assert (tmp_path / "fit/checkpoint/sky/gaussians.ply").exists() and not result.actors

@@ -1,0 +1,101 @@
+"""A real tracked drive's fits scored on its moving vehicles: held-out PSNR over the pixels the
+labels' own 2D boxes give the vehicles that drive, and elsewhere.
+
+    symdrive import kitti-raw 2011_09_26/2011_09_26_drive_0009_sync --out drive --heldout-every 5 --copy-images
+    symdrive import tracks drive label_02/0001.txt --calib calib/0001.txt
+    symdrive reconstruct drive --out fits/static --no-link --no-decompose
+    symdrive reconstruct drive --out fits/boxes --no-link --no-refine-poses
+    symdrive reconstruct drive --out fits/refined --no-link
+    python scripts/eval_tracked_drive.py drive label_02/0001.txt \\
+        --fit static=fits/static --fit boxes=fits/boxes --fit refined=fits/refined --out tracked.json
+
+A real drive has no vehicle masks; KITTI's tracking labels draw each object's 2D box in the
+image by hand, apart from its 3D box, so they mark the vehicles' pixels without the fits' help.
+A vehicle drives when its box's centre moves more than ``--moving-m`` in the package's world
+over its frames (the parked cars' boxes drift with the labels' and the ego poses' jitter). Each
+fit is rendered with the vehicles where it placed them (its refined poses, where it has them)
+by :func:`symdrive_core.eval.edits.evaluate_decomposition`; a static fit has no vehicles.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def moving_tracks(manifest, moving_m: float) -> list[str]:
+    """Recorded vehicles whose box centre moves more than ``moving_m`` metres over their frames."""
+    import numpy as np
+
+    ids = []
+    for a in manifest.actors:
+        if a.kind != "existing" or a.wlh is None:
+            continue
+        centres = np.array([p.translation for f in range(len(a.poses)) if (p := a.recorded_pose(f)) is not None])
+        if len(centres) > 1 and np.linalg.norm(centres.max(0) - centres.min(0)) > moving_m:
+            ids.append(a.id)
+    return ids
+
+
+def label_masks(labels: Path, track_ids: list[str], shape: tuple[int, int], label_size: tuple[int, int],
+                frame_offset: int = 0) -> dict:
+    """Frame -> boolean image: the labels' 2D boxes (``x1 y1 x2 y2``, KITTI pixels of an image
+    ``label_size`` = (width, height)) of the label tracks ``track_ids``, scaled to ``shape``."""
+    import numpy as np
+
+    h, w = shape
+    sx, sy = w / label_size[0], h / label_size[1]
+    masks: dict[int, np.ndarray] = {}
+    for line in labels.read_text().splitlines():
+        words = line.split()
+        if len(words) < 10 or words[1] not in track_ids:
+            continue
+        frame = int(words[0]) - frame_offset
+        x1, y1, x2, y2 = (float(v) for v in words[6:10])
+        mask = masks.setdefault(frame, np.zeros((h, w), bool))
+        # KITTI's pixel i covers [i - 0.5, i + 0.5]: the box's pixels are those whose centres it holds
+        mask[max(0, round(sy * (y1 + 0.5) - 0.5)):round(sy * (y2 + 0.5) + 0.5),
+             max(0, round(sx * (x1 + 0.5) - 0.5)):round(sx * (x2 + 0.5) + 0.5)] = True
+    return masks
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("package", type=Path, help="the drive's package, its tracks imported")
+    p.add_argument("labels", type=Path, help="the KITTI tracking label file the tracks came from")
+    p.add_argument("--fit", action="append", required=True, metavar="NAME=DIR",
+                   help="a reconstruction folder, named; repeat for each fit")
+    p.add_argument("--moving-m", type=float, default=2.0, help="a vehicle drives if its box moves this far")
+    p.add_argument("--label-size", type=int, nargs=2, default=(1242, 375), metavar=("W", "H"),
+                   help="the size of the images the labels were drawn on")
+    p.add_argument("--frame-offset", type=int, default=0, help="the label frame of the package's frame 0")
+    p.add_argument("--out", type=Path, default=Path("tracked.json"))
+    args = p.parse_args(argv)
+
+    from symdrive_core.eval.edits import evaluate_decomposition
+    from symdrive_core.io.atomic import write_text_atomic
+    from symdrive_core.optim.pose_refine import read_refined, with_refined
+    from symdrive_core.optim.reconstruct import read_reconstruction
+    from symdrive_core.scene import load_manifest
+
+    manifest = load_manifest(args.package)
+    cam = manifest.cameras[0]
+    ids = moving_tracks(manifest, args.moving_m)
+    labelled = [a.removeprefix("track_") for a in ids if a.startswith("track_")]  # ``import tracks``' names
+    masks = label_masks(args.labels, labelled, (cam.height, cam.width), tuple(args.label_size), args.frame_offset)
+    results = {"moving": ids}
+    for spec in args.fit:
+        name, _, folder = spec.partition("=")
+        background, actors, shadows = read_reconstruction(Path(folder))
+        m = with_refined(load_manifest(args.package), read_refined(Path(folder)))  # changes it in place
+        results[name] = evaluate_decomposition(m, background, actors, shadows=shadows, masks=masks)
+        print(name, json.dumps(results[name]), flush=True)
+    write_text_atomic(args.out, json.dumps(results, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.exit(main())
