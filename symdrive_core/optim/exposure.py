@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..errors import InputError
+from ..io import open_regular
 from ..io.atomic import write_text_atomic
 from .param_state import SideParameters
 
@@ -88,11 +90,24 @@ class Exposure(SideParameters):
 
 
 def read_exposure(folder: Path) -> dict[str, np.ndarray]:
-    """Each camera's transform from a reconstruction's ``exposure.json`` (empty without one)."""
+    """Each camera's transform from a reconstruction's ``exposure.json`` (empty without one): the
+    file travels with the ``background.ply`` beside it, so a package reconstructed before the run
+    is scored in its cameras' colours too. A file that is no such record is an :class:`InputError`
+    naming the field."""
     path = Path(folder) / EXPOSURE_FILE
     if not path.is_file():
         return {}
-    return {cam: np.asarray(m, np.float64) for cam, m in json.loads(path.read_text())["cameras"].items()}
+    with open_regular(path) as f:
+        text = f.read().decode("utf-8", errors="replace")
+    try:
+        cameras = json.loads(text)["cameras"]
+        out = {str(cam): np.asarray(m, np.float64) for cam, m in cameras.items()}
+    except (json.JSONDecodeError, KeyError, TypeError, AttributeError, ValueError):
+        raise InputError(path, "expected {\"cameras\": {name: 3x4 numbers}}", "cameras") from None
+    for cam, m in out.items():
+        if m.shape != (3, 4) or not np.isfinite(m).all():
+            raise InputError(path, f"expected 3x4 finite numbers, got shape {m.shape}", f"cameras.{cam}")
+    return out
 
 
 def recorded_colours(image: np.ndarray, transform: np.ndarray | None) -> np.ndarray:

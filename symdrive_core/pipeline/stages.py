@@ -105,6 +105,14 @@ def background_path(ctx) -> Path | None:
     return ctx.manifest.resolve(ctx.manifest.background_splats)
 
 
+def exposure(ctx) -> dict:
+    """The cameras' colour transforms: this run's reconstruction's, else those written beside the
+    package's background splats by the reconstruction that made them (none: empty)."""
+    from ..optim.exposure import read_exposure
+
+    return ctx.shared.exposure or read_exposure(background_path(ctx).parent)
+
+
 def background(ctx):
     from ..io.ply import read_splats
 
@@ -486,7 +494,7 @@ def evaluate_stage(ctx) -> StageResult:
     has_background = background_path(ctx) is not None
     if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
         metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx),
-                                                     shadows=recorded_shadows(ctx), exposure=ctx.shared.exposure)
+                                                     shadows=recorded_shadows(ctx), exposure=exposure(ctx))
     if has_insertion_truth(m) and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))

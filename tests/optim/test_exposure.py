@@ -83,3 +83,29 @@ def test_a_render_is_put_in_a_cameras_colours_and_clipped():
     A = np.concatenate([np.diag(GAIN), BIAS[:, None]], 1)
     out = recorded_colours(img, A)
     assert np.allclose(out, np.clip(0.9 * GAIN + BIAS, 0, 1)) and recorded_colours(img, None) is img
+
+
+def test_a_run_on_a_package_reconstructed_before_scores_through_the_transforms_beside_its_splats(tinted_rig, tmp_path):
+    """``symdrive run`` on a package whose background ``symdrive reconstruct`` linked earlier reads
+    the cameras' transforms written beside its ``background.ply``; a run that fitted its own keeps
+    those; a broken record is refused naming the field."""
+    from types import SimpleNamespace
+
+    from symdrive_core.errors import InputError
+    from symdrive_core.pipeline.stages import exposure
+
+    m, fitted, _ = tinted_rig
+    m.background_splats = (fitted.output / "background.ply").relative_to(m.root).as_posix()
+    ctx = SimpleNamespace(manifest=m, shared=SimpleNamespace(exposure={}, background_path=None))
+    assert exposure(ctx)["right"] == pytest.approx(fitted.exposure["right"], abs=1e-5)
+    ctx.shared.exposure = {"right": np.eye(3, 4)}  # this run's own fit
+    assert exposure(ctx)["right"] is ctx.shared.exposure["right"]
+    (tmp_path / "background.ply").write_bytes(b"")
+    ctx = SimpleNamespace(manifest=m, shared=SimpleNamespace(exposure={}, background_path=tmp_path / "background.ply"))
+    assert exposure(ctx) == {}  # splats without a record: every camera as rendered
+    (tmp_path / "exposure.json").write_text('{"cameras": {"right": [[1, 0, 0], [0, 1, 0]]}}')
+    with pytest.raises(InputError, match="cameras.right"):
+        exposure(ctx)
+    (tmp_path / "exposure.json").write_text('{"mode": "camera"}')
+    with pytest.raises(InputError, match="exposure.json: cameras"):
+        exposure(ctx)
