@@ -93,23 +93,21 @@ def count_int(value: str) -> int:
 
 def unit_fraction(value: str) -> float:
     """A share from 0 to 1 (a restorer's strength)."""
-    try:
-        x = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number from 0 to 1, got {value!r}") from None
-    if not 0.0 <= x <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be from 0 to 1, got {value}")
-    return x
+    return _float_between(value, 0.0, 1.0, "a number from 0 to 1", "from 0 to 1")
 
 
 def angle_deg(value: str) -> float:
     """An angle from 0 to 90 degrees (a size seen from afar)."""
+    return _float_between(value, 0.0, 90.0, "a number of degrees", "from 0 to 90 degrees")
+
+
+def _float_between(value: str, low: float, high: float, expected: str, bounds: str) -> float:
     try:
         x = float(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of degrees, got {value!r}") from None
-    if not 0.0 <= x <= 90.0:
-        raise argparse.ArgumentTypeError(f"must be from 0 to 90 degrees, got {value}")
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {value!r}") from None
+    if not low <= x <= high:
+        raise argparse.ArgumentTypeError(f"must be {bounds}, got {value}")
     return x
 
 
