@@ -39,25 +39,26 @@ def moving_tracks(manifest, moving_m: float) -> list[str]:
     return ids
 
 
-def label_masks(labels: Path, track_ids: list[str], shape: tuple[int, int], label_size: tuple[int, int],
+def label_masks(labels: Path, ids: list[str], shape: tuple[int, int], label_size: tuple[int, int],
                 frame_offset: int = 0) -> dict:
-    """Frame -> boolean image: the labels' 2D boxes (``x1 y1 x2 y2``, KITTI pixels of an image
-    ``label_size`` = (width, height)) of the label tracks ``track_ids``, scaled to ``shape``."""
+    """Frame -> boolean image: the labels' 2D boxes (KITTI pixels of an image ``label_size`` =
+    (width, height)) of the tracks ``ids`` (named as ``import tracks`` names them), scaled to
+    ``shape``."""
     import numpy as np
+
+    from symdrive_core.importers.tracks import read_kitti_label_boxes
 
     h, w = shape
     sx, sy = w / label_size[0], h / label_size[1]
     masks: dict[int, np.ndarray] = {}
-    for line in labels.read_text().splitlines():
-        words = line.split()
-        if len(words) < 10 or words[1] not in track_ids:
+    for track, boxes in read_kitti_label_boxes(labels).items():
+        if track not in ids:
             continue
-        frame = int(words[0]) - frame_offset
-        x1, y1, x2, y2 = (float(v) for v in words[6:10])
-        mask = masks.setdefault(frame, np.zeros((h, w), bool))
-        # KITTI's pixel i covers [i - 0.5, i + 0.5]: the box's pixels are those whose centres it holds
-        mask[max(0, round(sy * (y1 + 0.5) - 0.5)):round(sy * (y2 + 0.5) + 0.5),
-             max(0, round(sx * (x1 + 0.5) - 0.5)):round(sx * (x2 + 0.5) + 0.5)] = True
+        for frame, (x1, y1, x2, y2) in boxes.items():
+            mask = masks.setdefault(frame - frame_offset, np.zeros((h, w), bool))
+            # KITTI's pixel i covers [i - 0.5, i + 0.5]: the box's pixels are those whose centres it holds
+            mask[max(0, round(sy * (y1 + 0.5) - 0.5)):round(sy * (y2 + 0.5) + 0.5),
+                 max(0, round(sx * (x1 + 0.5) - 0.5)):round(sx * (x2 + 0.5) + 0.5)] = True
     return masks
 
 
@@ -83,8 +84,7 @@ def main(argv=None) -> int:
     manifest = load_manifest(args.package)
     cam = manifest.cameras[0]
     ids = moving_tracks(manifest, args.moving_m)
-    labelled = [a.removeprefix("track_") for a in ids if a.startswith("track_")]  # ``import tracks``' names
-    masks = label_masks(args.labels, labelled, (cam.height, cam.width), tuple(args.label_size), args.frame_offset)
+    masks = label_masks(args.labels, ids, (cam.height, cam.width), tuple(args.label_size), args.frame_offset)
     results = {"moving": ids}
     for spec in args.fit:
         name, _, folder = spec.partition("=")

@@ -42,10 +42,12 @@ def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: di
     truth's vehicle masks, or ``masks``: boolean images by frame, where a real drive's labels
     put its moving vehicles), the recorded vehicles at their recorded poses with their ``shadows``
     (shadow layers, by actor id)."""
+    frames = split_frames(manifest)[1] if frames is None else frames
     if masks is None:
         require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
-        masks = {f: read_mask(manifest.resolve(path)) > 0.5 for f, path in vehicle_masks(manifest).items()}
-    frames = [f for f in (split_frames(manifest)[1] if frames is None else frames) if f in masks]
+        paths = vehicle_masks(manifest)
+        masks = {f: read_mask(manifest.resolve(paths[f])) > 0.5 for f in frames if f in paths}
+    frames = [f for f in frames if f in masks]
     cam = manifest.cameras[0]
     renderer = TrafficRenderer(background, actors, shadows)
     rows = {"image": [], "vehicles": [], "elsewhere": []}

@@ -243,6 +243,7 @@ class _Label:
     hwl: np.ndarray
     bottom: np.ndarray
     rotation_y: float
+    box2d: np.ndarray  # x1 y1 x2 y2: the annotator's box in the labelled image's pixels
 
 
 def _label_int(text: str, path: Path, where: str, what: str, minimum: int) -> int:
@@ -287,7 +288,7 @@ def _read_label_lines(path: Path, types: tuple[str, ...]) -> tuple[dict[int, lis
         earlier = next((x.line for x in tracks.get(track, []) if x.frame == frame), None)
         if earlier is not None:
             raise InputError(path, f"track {track} has a box in frame {frame} already (line {earlier})", where)
-        tracks.setdefault(track, []).append(_Label(n, frame, hwl, bottom, float(values[13])))
+        tracks.setdefault(track, []).append(_Label(n, frame, hwl, bottom, float(values[13]), values[3:7]))
     return tracks, skipped
 
 
@@ -301,8 +302,20 @@ def read_kitti_labels(path: Path, types: tuple[str, ...] = TracksConfig.types) -
         boxes = [Box(r.frame, *_from_kitti_axes(r.bottom, _kitti_r_y(r.rotation_y), h), f"line {r.line}",
                      r.hwl[[1, 2, 0]]) for r in rows]
         first = f"line {rows[0].line}"
-        tracks.append(Track(f"track_{tid}", np.array([w, length, h]), boxes, first, (first,) * 3))
+        tracks.append(Track(_track_name(tid), np.array([w, length, h]), boxes, first, (first,) * 3))
     return Tracks(path, "camera", tracks, dict(skipped))
+
+
+def read_kitti_label_boxes(path: Path, types: tuple[str, ...] = TracksConfig.types) -> dict[str, dict[int, np.ndarray]]:
+    """The labels' own 2D boxes (``x1 y1 x2 y2`` in the labelled image's pixels) by track, named
+    as :func:`read_kitti_labels` names it, and frame: where the annotators saw each vehicle,
+    drawn apart from its 3D box (what scores a real drive's moving vehicles)."""
+    labels, _ = _read_label_lines(Path(path), tuple(types))
+    return {_track_name(tid): {r.frame: r.box2d for r in rows} for tid, rows in labels.items()}
+
+
+def _track_name(tid: int) -> str:
+    return f"track_{tid}"
 
 
 def read_camera_offset(path: Path) -> np.ndarray:

@@ -114,11 +114,8 @@ def sensor_dome(manifest: Manifest, views: list[View], cfg: ReconstructConfig) -
         return None
     n = len(pts)
     size = radius * np.tan(np.radians(cfg.sky.sensor_dome_deg))
-    return Gaussians(
-        means=pts, quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-        log_scales=np.full((n, 3), np.log(size), np.float32),
-        opacity_logits=np.full(n, np.log(cfg.init_opacity / (1 - cfg.init_opacity)), np.float32),
-        sh=rgb_to_sh_dc(cols)[:, None, :].astype(np.float32))
+    return Gaussians.from_activated(pts, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), np.full((n, 3), size),
+                                    np.full(n, cfg.init_opacity), cols)
 
 
 def dome_radius(views: list[View]) -> float:

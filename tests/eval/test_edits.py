@@ -112,7 +112,7 @@ def test_a_real_drives_label_boxes_score_its_moving_vehicles(traffic_truth, tmp_
     script = load_script("eval_tracked_drive")
     assert script.moving_tracks(m, 2.0) == ["car_1"]
     shape, size = (m.cameras[0].height, m.cameras[0].width), (2 * m.cameras[0].width, 2 * m.cameras[0].height)
-    masks = script.label_masks(labels, ["1"], shape, size)
+    masks = script.label_masks(labels, ["track_1"], shape, size)
     assert set(masks) == set(rects) and all(np.array_equal(masks[f], rects[f]) for f in rects)
     # the script names tracks as ``import tracks`` does: the box as actor ``track_1``
     root = tmp_path / "pkg"

@@ -226,6 +226,19 @@ def test_kitti_labels_give_back_the_world_boxes(pkg, tmp_path, capsys):
         assert_same_corners(devkit, world)
 
 
+def test_kitti_labels_keep_their_own_2d_boxes_by_track_and_frame(pkg, tmp_path):
+    """The annotators' 2D boxes (``x1 y1 x2 y2``) come back by track, named as the import names
+    its actors, and frame; what the types leave out has none."""
+    from symdrive_core.importers.tracks import read_kitti_label_boxes
+
+    labels = kitti_file(tmp_path / "0003.txt", load_manifest(pkg))
+    boxes = read_kitti_label_boxes(labels)
+    assert set(boxes) == {"track_3"} and set(boxes["track_3"]) == {fi for fi, _, _ in WORLD_BOXES}
+    for box in boxes["track_3"].values():
+        np.testing.assert_array_equal(box, [100, 120, 150, 170])  # kitti_label's x1 y1 x2 y2
+    assert set(read_kitti_label_boxes(labels, ("Car", "Pedestrian"))) == {"track_3", "track_8"}
+
+
 def test_kitti_calibration_moves_boxes_from_camera_0_into_camera_2(pkg, tmp_path):
     m = load_manifest(pkg)
     offset = np.array([-0.06, 0.002, 0.003])  # camera 2 in rectified camera 0's frame
