@@ -223,12 +223,17 @@ def _options(args, copy_images: bool = False):
                    heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 
 
-def _triangulate(src, opt) -> None:
-    """A source without points or splats gets points triangulated from its images (poses fixed);
-    one without images too can still be placed by --up and --camera-height alone."""
+def _start_points(src, opt) -> None:
+    """The start points of the training frames only: a held-out frame's LiDAR returns left out,
+    and a source without points or splats gets points triangulated from its training frames'
+    images (poses fixed); one without images too can still be placed by --up and --camera-height."""
     from ..errors import InputError
-    from ..importers.triangulate import triangulate
+    from ..importers.start_points import drop_heldout_returns, training_frames, triangulate_training
 
+    train = training_frames(src, opt.heldout_every)
+    dropped = drop_heldout_returns(src, train)
+    if dropped:
+        print(f"left out {dropped} LiDAR returns of held-out frames from the start points", flush=True)
     if src.points is not None or src.splats is not None:
         return
     if any(v.image is None for row in src.grouped.table for v in row):
@@ -237,11 +242,10 @@ def _triangulate(src, opt) -> None:
         raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
                          "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
     t0 = time.perf_counter()
-    n = sum(len(row) for row in src.grouped.table)
-    print(f"no points in the source: triangulating them from {n} images with the poses fixed", flush=True)
-    tri = triangulate(src.grouped, opt.out)
-    src.points, src.colors = tri.points, tri.colors
-    src.notes["triangulated"] = tri.record
+    n = len(train) * len(src.grouped.cameras)
+    print(f"no points in the source: triangulating them from {n} images of the training frames with the poses "
+          "fixed", flush=True)
+    tri = triangulate_training(src, opt.out, train)
     print(f"triangulated {tri.record['points']} points ({tri.record['mean_reprojection_error_px']:.2f} px mean "
           f"reprojection error, {time.perf_counter() - t0:.1f} s)")
 
@@ -250,7 +254,7 @@ def _finish(src, args, t0, copy_images: bool = False, options=None, extend=None,
     from ..importers.package import write_package
 
     opt = options or _options(args, copy_images)
-    _triangulate(src, opt)
+    _start_points(src, opt)
     info = write_package(src, opt, progress=not args.quiet, extend=extend)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "

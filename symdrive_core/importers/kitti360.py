@@ -254,12 +254,12 @@ def read_kitti360(root: str | Path, sequence: str, config: Kitti360Config = Kitt
                                    {i: rig[i].rect0_from_camera for i in cameras},
                                    [(pose_path, posed[int(n)][1]) for n in names])
     grouped = group_views(views, camera_name=first, fps=fps)
-    scans, points, colors = None, None, None
+    scans, points, colors, point_frames = None, None, None, None
     if scans_dir.is_dir():
         scans = _scans(scans_dir, names, len(images[cameras[0]]), first)
         cam = rig[cameras[0]]
         world_from_velo = world_from_rect0 @ cam.rect0_from_camera @ cam.velo_to_camera
-        points, colors = seen_returns(scans, world_from_velo, [cam.velo_to_camera] * len(scans), cam.K, cam.width,
+        points, colors, point_frames = seen_returns(scans, world_from_velo, [cam.velo_to_camera] * len(scans), cam.K, cam.width,
                                       cam.height, [images[cameras[0]][n] for n in names], config.lidar_points,
                                       config.lidar.min_depth_m)
     boxes_path = root / "data_3d_bboxes" / "train" / f"{sequence}.xml"
@@ -274,6 +274,6 @@ def read_kitti360(root: str | Path, sequence: str, config: Kitti360Config = Kitt
              "kitti360_cameras": {camera_name(i): {"rect0_from_camera": rig[i].rect0_from_camera.tolist()}
                                   for i in cameras}}
     src = Source("kitti-360", root, grouped, splats=g, splats_path=None if splats is None else Path(splats),
-                 points=points, colors=colors, notes=notes)
+                 points=points, colors=colors, point_frames=point_frames, notes=notes)
     return Kitti360Sequence(src, {camera_name(i): rig[i] for i in cameras}, scans, boxes, boxes_path, skipped,
                             config, progress)

@@ -148,7 +148,7 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
                                    [(p, 1) for p in oxts])
     grouped = group_views(views, camera_name=camera_name(cameras[0]), fps=fps)
     first = rig[cameras[0]]
-    scans_dir, points, colors = drive / SCANS, None, None
+    scans_dir, points, colors, point_frames = drive / SCANS, None, None, None
     if scans_dir.is_dir():
         scans = list_scans(scans_dir)
         if [p.stem for p in scans] != names:
@@ -157,7 +157,7 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
                              f"/data (frame {missing[0] if missing else '?'}): expected one scan per image, named "
                              "as it", "velodyne_points")
         world_from_velo = world_from_imu @ conventions.invert_rigid(first.imu_to_camera) @ first.velo_to_camera
-        points, colors = seen_returns(scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K,
+        points, colors, point_frames = seen_returns(scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K,
                                       first.width, first.height, [images[cameras[0]][n] for n in names],
                                       config.lidar_points, config.lidar.min_depth_m)
     tracklets_path = drive / TRACKLETS
@@ -170,7 +170,7 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
     notes = {"drive": drive.name, "oxts": projection, "time_origin": time_origin,
              "kitti_cameras": {camera_name(i): {"imu_to_camera": rig[i].imu_to_camera.tolist()} for i in cameras}}
     src = Source("kitti-raw", drive, grouped, splats=g, splats_path=None if splats is None else Path(splats),
-                 points=points, colors=colors, notes=notes)
+                 points=points, colors=colors, point_frames=point_frames, notes=notes)
     return KittiRawDrive(src, {camera_name(i): rig[i] for i in cameras}, drive.resolve().parent / CALIB_VELO_TO_CAM,
                          scans_dir if points is not None else None,
                          tracklets, tracklets_path, config, progress)

@@ -131,8 +131,9 @@ def sparse_depth(points: np.ndarray, sensor_to_camera: np.ndarray, K: np.ndarray
 
 
 def seen_returns(scans: list[Path], world_from_sensor, sensor_to_camera, K: np.ndarray, width: int, height: int,
-                 images: list[Path], count: int, min_depth_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """(points [N, 3] in the world of ``world_from_sensor[i]``, colours [N, 3]): of each scan
+                 images: list[Path], count: int, min_depth_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points [N, 3] in the world of ``world_from_sensor[i]``, colours [N, 3], the scan ``i`` of
+    each [N]): of each scan
     ``scans[i]`` an even share of ``count`` of the returns that land in a camera's image
     (``sensor_to_camera[i]``, ``K``, ``width`` x ``height``), each coloured from ``images[i]`` where
     it lands. A drive's metric points (the ground under the path, where the reconstruction starts)
@@ -141,8 +142,8 @@ def seen_returns(scans: list[Path], world_from_sensor, sensor_to_camera, K: np.n
 
     rng = np.random.default_rng(0)
     share = -(-count // len(scans))
-    points, colors = [], []
-    for scan, image, w_sensor, s_to_c in zip(scans, images, world_from_sensor, sensor_to_camera):
+    points, colors, frames = [], [], []
+    for i, (scan, image, w_sensor, s_to_c) in enumerate(zip(scans, images, world_from_sensor, sensor_to_camera)):
         p = read_scan(scan)
         keep, row, col, _ = landing(p, s_to_c, K, width, height, min_depth_m)
         if len(keep) > share:
@@ -151,7 +152,8 @@ def seen_returns(scans: list[Path], world_from_sensor, sensor_to_camera, K: np.n
         rgb = read_image(image, channels=3)
         colors.append(rgb[row, col])
         points.append(p[keep] @ w_sensor[:3, :3].T + w_sensor[:3, 3])
-    return np.concatenate(points), np.concatenate(colors).astype(np.float64)
+        frames.append(np.full(len(keep), i))
+    return np.concatenate(points), np.concatenate(colors).astype(np.float64), np.concatenate(frames)
 
 
 def list_scans(folder: Path) -> list[Path]:

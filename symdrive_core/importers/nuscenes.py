@@ -244,7 +244,7 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
              for channel in config.cameras for s in samples]
     grouped = _in_order(group_views(views, camera_name=config.cameras[0]), tuple(config.cameras))
     frames = {name: fi for fi, name in enumerate(grouped.frame_keys)}
-    scans, points, colors, to_camera = None, None, None, {}
+    scans, points, colors, point_frames, to_camera = None, None, None, None, {}
     if any(LIDAR in keyframes[s] for s in samples):
         sweeps = [_keyframe(sd, keyframes, s, LIDAR, LIDAR) for s in grouped.frame_keys]
         scans = [sd.file(t, "filename", dataroot) for t in sweeps]
@@ -254,7 +254,7 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
         first = grouped.table[0]
         for v in first:  # read for their colours before the package checks them
             check_image(v.image, v.width, v.height, v.source, v.where)
-        points, colors = seen_returns(scans, world_from_lidar, to_camera[grouped.cameras[0]], first[0].K,
+        points, colors, point_frames = seen_returns(scans, world_from_lidar, to_camera[grouped.cameras[0]], first[0].K,
                                       first[0].width, first[0].height, [v.image for v in first],
                                       config.lidar_points, config.lidar.min_depth_m)
     tracks, instances = _tracks(tables, frames, tuple(config.categories))
@@ -268,5 +268,5 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
                           "location": tables["log"].text(log, "location"), "time_origin_us": t0,
                           "instances": instances}}
     src = Source("nuscenes", dataroot, grouped, splats=g, splats_path=None if splats is None else Path(splats),
-                 points=points, colors=colors, notes=notes)
+                 points=points, colors=colors, point_frames=point_frames, notes=notes)
     return NuScenesScene(src, scans, to_camera, tracks, config, progress)

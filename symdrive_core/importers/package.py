@@ -32,6 +32,9 @@ class Source:
     splats_path: Path | None = None
     points: np.ndarray | None = None  # [N, 3] sparse points
     colors: np.ndarray | None = None  # [N, 3] in [0, 1]
+    # [N] the frame each point was seen in (a LiDAR's returns), so a held-out frame's can be left
+    # out; None: points of no one frame (triangulated, a model's, a splat file's)
+    point_frames: np.ndarray | None = None
     # Maps the original reconstruction's frame to the frame the poses are written in (nerfstudio's
     # applied_transform); None: the same frame.
     pre: np.ndarray | None = None

@@ -45,20 +45,23 @@ class Triangulated:
     record: dict  # for the manifest's source block
 
 
-def _layout(grouped: Grouped, folder: Path) -> dict[str, tuple]:
-    """Link every image in as ``{frame:06d}/{camera}{ext}``: sorted by name, a frame's cameras sit
-    together and the sequential matcher pairs them as well as neighbouring frames."""
+def _layout(grouped: Grouped, folder: Path, frames: list[int]) -> dict[str, tuple]:
+    """Link the images of ``frames`` in as ``{frame:06d}/{camera}{ext}``: sorted by name, a frame's
+    cameras sit together and the sequential matcher pairs them as well as neighbouring frames."""
     names = {}
     for cam, row in zip(grouped.cameras, grouped.table):
-        for fi, v in enumerate(row):
+        for fi in frames:
+            v = row[fi]
             name = f"{fi:06d}/{cam}{v.image.suffix.lower()}"
             link_or_copy(v.image, folder / name)
             names[name] = (v, np.asarray(v.K, dtype=np.float64))
     return names
 
 
-def triangulate(grouped: Grouped, near: Path, cfg: TriangulateConfig = DEFAULT) -> Triangulated:
-    """Triangulate points from ``grouped``'s images with its poses fixed; work beside ``near``."""
+def triangulate(grouped: Grouped, near: Path, cfg: TriangulateConfig = DEFAULT,
+                frames: list[int] | None = None) -> Triangulated:
+    """Triangulate points from the images of ``grouped``'s ``frames`` (default: all) with its poses
+    fixed; work beside ``near``."""
     pycolmap = load_pycolmap()
     near = Path(near)
     near.parent.mkdir(parents=True, exist_ok=True)
@@ -66,7 +69,7 @@ def triangulate(grouped: Grouped, near: Path, cfg: TriangulateConfig = DEFAULT) 
     level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = int(pycolmap.logging.Level.WARNING)  # per-image progress is noise here
     try:
-        names = _layout(grouped, tmp / "images")
+        names = _layout(grouped, tmp / "images", list(range(len(grouped.frame_keys))) if frames is None else frames)
         db = tmp / "database.db"
         extraction = pycolmap.FeatureExtractionOptions()
         extraction.max_image_size = cfg.max_image_size

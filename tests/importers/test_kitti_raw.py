@@ -16,6 +16,7 @@ from symdrive_core.conventions import invert_rigid
 from symdrive_core.importers.kitti_raw import KittiRawConfig, read_kitti_raw
 from symdrive_core.importers.oxts import EARTH_RADIUS_M, euler_rotation
 from symdrive_core.io.images import read_image, write_image
+from symdrive_core.io.points import read_points
 from symdrive_core.scene import load_manifest
 
 from . import drives
@@ -200,6 +201,22 @@ def test_the_lidar_points_are_the_first_cameras_returns_coloured_there(drive):
     image = read_image(drive / "image_02" / "data" / "0000000000.png", channels=3)
     assert np.array_equal(d.source.colors[:n], image[row[seen].astype(int), col[seen].astype(int)])
     assert len(read_kitti_raw(drive).source.points) <= KittiRawConfig().lidar_points
+    assert np.array_equal(d.source.point_frames[:n], np.zeros(n)) and d.source.point_frames[n] == 1
+
+
+def test_held_out_frames_returns_never_reach_the_start_points(drive, tmp_path, capsys):
+    """Imported with every 4th frame held out (frames 2 and 6), the start points are the training
+    frames' returns, with the colours the training frames' images gave them."""
+    every = read_kitti_raw(drive).source
+    train = np.isin(every.point_frames, [0, 1, 3, 4, 5, 7])
+    assert 0 < train.sum() < len(train)
+    out = tmp_path / "pkg"
+    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--heldout-every", "4", "--quiet"]) == 0
+    assert f"left out {(~train).sum()} LiDAR returns of held-out frames" in capsys.readouterr().out
+    m = load_manifest(out)
+    assert m.ground_truth["heldout_frames"] == [2, 6]
+    _, colors = read_points(m.resolve(m.background_points))
+    np.testing.assert_allclose(colors, every.colors[train], atol=1 / 255)  # the file holds 8-bit colours
 
 
 def test_the_tracklet_comes_back_as_an_existing_actor(package, capsys):
