@@ -15,6 +15,7 @@ from ..importers.kitti360 import Kitti360Config
 from ..importers.kitti_calib import CAMERAS as KITTI_CAMERAS
 from ..importers.kitti_raw import KittiRawConfig
 from ..importers.nuscenes import NuScenesConfig
+from ..importers.start_points import StartPointsConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
 from . import add_quiet_option, count_int, default_of, frames_arg, names_arg, positive_int
 
@@ -116,6 +117,7 @@ def _kitti_raw_command(isub) -> None:
                    help=f"tracklet object types imported as vehicles (default {','.join(KittiRawConfig.types)})")
     _common(p, images=False, camera_name=False)
     _lateral_truth_option(p)
+    _lidar_start_option(p)
     p.set_defaults(func=_kitti_raw)
 
 
@@ -134,7 +136,15 @@ def _kitti360_command(isub) -> None:
                    help=f"box classes imported as vehicles (default {','.join(Kitti360Config.types)})")
     _common(p, images=False, camera_name=False)
     _lateral_truth_option(p)
+    _lidar_start_option(p)
     p.set_defaults(func=_kitti360)
+
+
+def _lidar_start_option(p) -> None:
+    p.add_argument("--triangulate-beyond-lidar", action=argparse.BooleanOptionalAction, default=None,
+                   help="join the LiDAR's returns, where the reconstruction starts, with points triangulated from "
+                        f"the training images where no return is within {StartPointsConfig.beyond_lidar_m:g} m "
+                        "(default: on; the tops of trees and buildings, the far street)")
 
 
 def _camera_list(text: str) -> tuple[int, ...]:
@@ -158,6 +168,7 @@ def _nuscenes_command(isub) -> None:
                    help="channels imported as package cameras, the first the package's first "
                         f"(default {','.join(NuScenesConfig.cameras)})")
     _common(p, images=False, camera_name=False)
+    _lidar_start_option(p)
     p.set_defaults(func=_nuscenes)
 
 
@@ -223,38 +234,28 @@ def _options(args, copy_images: bool = False):
                    heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 
 
-def _start_points(src, opt) -> None:
-    """The start points of the training frames only: a held-out frame's LiDAR returns left out,
-    and a source without points or splats gets points triangulated from its training frames'
-    images (poses fixed); one without images too can still be placed by --up and --camera-height."""
-    from ..errors import InputError
-    from ..importers.start_points import drop_heldout_returns, training_frames, triangulate_training
+def _start_points(src, opt, args) -> None:
+    """The start points (:mod:`..importers.start_points`); a source with neither points nor images
+    can still be placed by --up and --camera-height alone."""
+    from dataclasses import replace
 
-    train = training_frames(src, opt.heldout_every)
-    dropped = drop_heldout_returns(src, train)
-    if dropped:
-        print(f"left out {dropped} LiDAR returns of held-out frames from the start points", flush=True)
-    if src.points is not None or src.splats is not None:
-        return
-    if any(v.image is None for row in src.grouped.table for v in row):
-        if opt.up is not None and opt.camera_height is not None:
-            return
+    from ..errors import InputError
+    from ..importers.start_points import start_points
+    from . import given
+
+    fields = given(args, "triangulate_beyond_lidar") if hasattr(args, "triangulate_beyond_lidar") else {}
+    start_points(src, opt.out, opt.heldout_every, replace(StartPointsConfig(), **fields),
+                 log=lambda line: print(line, flush=True))
+    if src.points is None and src.splats is None and not (opt.up is not None and opt.camera_height is not None):
         raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
                          "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
-    t0 = time.perf_counter()
-    n = len(train) * len(src.grouped.cameras)
-    print(f"no points in the source: triangulating them from {n} images of the training frames with the poses "
-          "fixed", flush=True)
-    tri = triangulate_training(src, opt.out, train)
-    print(f"triangulated {tri.record['points']} points ({tri.record['mean_reprojection_error_px']:.2f} px mean "
-          f"reprojection error, {time.perf_counter() - t0:.1f} s)")
 
 
 def _finish(src, args, t0, copy_images: bool = False, options=None, extend=None, report=None) -> int:
     from ..importers.package import write_package
 
     opt = options or _options(args, copy_images)
-    _start_points(src, opt)
+    _start_points(src, opt, args)
     info = write_package(src, opt, progress=not args.quiet, extend=extend)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "
           f"scale {info['scale']:.6g} m per source unit, camera height {info['camera_height_m']:.3f} m "

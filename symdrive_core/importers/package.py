@@ -33,7 +33,7 @@ class Source:
     points: np.ndarray | None = None  # [N, 3] sparse points
     colors: np.ndarray | None = None  # [N, 3] in [0, 1]
     # [N] the frame each point was seen in (a LiDAR's returns), so a held-out frame's can be left
-    # out; None: points of no one frame (triangulated, a model's, a splat file's)
+    # out, -1 for points joined from no one frame; None: no frame's points (triangulated, a model's)
     point_frames: np.ndarray | None = None
     # Maps the original reconstruction's frame to the frame the poses are written in (nerfstudio's
     # applied_transform); None: the same frame.
@@ -109,7 +109,7 @@ def write_package(src: Source, opt: Options, progress: bool = True, extend=None)
     c2ws = np.stack([np.stack([v.c2w for v in row]) for row in g.table])  # [camera, frame, 4, 4]
     pts = None
     if src.points is not None and len(src.points):
-        pts = src.points
+        pts = src.points if src.point_frames is None else src.points[src.point_frames >= 0]  # the returns alone
     elif src.splats is not None and len(src.splats):
         pts = src.splats.means
     T, record = align(pts, c2ws, camera_height=opt.camera_height, scale=opt.scale, up=opt.up)
