@@ -31,7 +31,8 @@ class PoseRefineConfig:
     lr_rad: float = 1e-4  # and of the yaw corrections, radians
     prior_m: float = 0.3  # the track's error scale the pull towards it assumes
     prior_rad: float = 0.05
-    smooth_m: float = 0.05  # a second difference of the trajectory this large costs as a prior_m correction
+    smooth_order: int = 2  # the difference smoothed: 2 acceleration, 3 jerk (a steady turn or lane change costs nothing)
+    smooth_m: float = 0.05  # a difference of the trajectory this large costs as a prior_m correction
     smooth_rad: float = 0.01
     weight: float = 1e-3  # of the priors against one view's photometric loss
 

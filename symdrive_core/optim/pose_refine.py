@@ -123,10 +123,10 @@ class PoseRefinement:
         T, yaw = self.base_T + self.dt, self.base_yaw + self.dyaw
         smooth = torch.zeros((), dtype=torch.float64)
         for run in self.pieces:
-            if len(run) >= 3:
+            if len(run) > c.smooth_order:
                 idx = torch.tensor(run)
-                smooth = smooth + (T[idx[2:]] - 2 * T[idx[1:-1]] + T[idx[:-2]]).pow(2).sum() / c.smooth_m ** 2
-                smooth = smooth + (yaw[idx[2:]] - 2 * yaw[idx[1:-1]] + yaw[idx[:-2]]).pow(2).sum() / c.smooth_rad ** 2
+                smooth = smooth + torch.diff(T[idx], c.smooth_order, dim=0).pow(2).sum() / c.smooth_m ** 2
+                smooth = smooth + torch.diff(yaw[idx], c.smooth_order).pow(2).sum() / c.smooth_rad ** 2
         return c.weight * (prior + smooth) / max(n_views, 1)
 
     def step(self, it: int) -> None:
