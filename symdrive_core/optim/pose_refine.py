@@ -16,6 +16,9 @@ fitted jointly with the Gaussians (the rendered image's gradient reaches it thro
   unwrapped along the track), ``|T_{f+1} - 2 T_f + T_{f-1}|^2 / smooth_m^2`` and the same of the yaw
   over ``smooth_rad^2``: a car's motion is smooth from frame to frame, a tracker's error is not. A
   frame without an image (held out) is placed by this term alone, between its neighbours.
+  ``smooth_order`` 3 smooths the third difference (jerk) instead, which a steady lane change or
+  turn does not pay; measured on jittered boxes it frees a lane-changing car and loosens the
+  hold on straight ones about as much (docs/results.md), so 2 stays the default.
 
 The smoothness links consecutive frames of one *piece* of a track only: a frame without a box, or
 a frame the tracks import reported (a jump, a turn or a size change between consecutive boxes,

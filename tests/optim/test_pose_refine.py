@@ -84,6 +84,22 @@ def test_a_reported_jump_is_not_smoothed_into_a_motion():
     assert uncut.dt.detach()[5:7, 1].abs().min() > 1.0
 
 
+def test_the_smoothed_difference_is_the_configured_order():
+    """A lane change at constant lateral acceleration, turning at a constant rate: the
+    acceleration prior (order 2) charges it, the jerk prior (order 3) charges nothing; both equal
+    the float64 sum of squared differences over their scales."""
+    f = np.arange(10.0)
+    boxes = [Pose(np.array([2.0 * t, 0.04 * t * t, 0.8]), quat_from_yaw(0.01 * t)) for t in f]
+    for order in (2, 3):
+        cfg = PoseRefineConfig(smooth_order=order)
+        T = np.stack([2.0 * f, 0.04 * f * f, np.full(10, 0.8)], 1)
+        want = (np.diff(T, order, axis=0) ** 2).sum() / cfg.smooth_m ** 2 + \
+            (np.diff(0.01 * f, order) ** 2).sum() / cfg.smooth_rad ** 2
+        got = PoseRefinement("car", boxes, set(), cfg, 0).penalty(1).item() / cfg.weight
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+        assert (got > 1.0) if order == 2 else (got < 1e-9)
+
+
 def test_refined_poses_become_the_recorded_poses_and_the_tracks_boxes_are_kept(moving_box, tmp_path):
     root = tmp_path / "pkg"
     shutil.copytree(moving_box[0], root, ignore=shutil.ignore_patterns("reconstruction"))
