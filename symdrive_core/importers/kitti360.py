@@ -259,9 +259,9 @@ def read_kitti360(root: str | Path, sequence: str, config: Kitti360Config = Kitt
         scans = _scans(scans_dir, names, len(images[cameras[0]]), first)
         cam = rig[cameras[0]]
         world_from_velo = world_from_rect0 @ cam.rect0_from_camera @ cam.velo_to_camera
-        points, colors, point_frames = seen_returns(scans, world_from_velo, [cam.velo_to_camera] * len(scans), cam.K, cam.width,
-                                      cam.height, [images[cameras[0]][n] for n in names], config.lidar_points,
-                                      config.lidar.min_depth_m)
+        points, colors, point_frames = seen_returns(
+            scans, world_from_velo, [cam.velo_to_camera] * len(scans), cam.K, cam.width, cam.height,
+            [images[cameras[0]][n] for n in names], config.lidar_points, config.lidar.min_depth_m)
     boxes_path = root / "data_3d_bboxes" / "train" / f"{sequence}.xml"
     boxes, skipped = read_boxes(boxes_path, tuple(config.types)) if boxes_path.is_file() else (None, {})
     g = None

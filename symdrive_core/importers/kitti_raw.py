@@ -157,9 +157,9 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
                              f"/data (frame {missing[0] if missing else '?'}): expected one scan per image, named "
                              "as it", "velodyne_points")
         world_from_velo = world_from_imu @ conventions.invert_rigid(first.imu_to_camera) @ first.velo_to_camera
-        points, colors, point_frames = seen_returns(scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K,
-                                      first.width, first.height, [images[cameras[0]][n] for n in names],
-                                      config.lidar_points, config.lidar.min_depth_m)
+        points, colors, point_frames = seen_returns(
+            scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K, first.width, first.height,
+            [images[cameras[0]][n] for n in names], config.lidar_points, config.lidar.min_depth_m)
     tracklets_path = drive / TRACKLETS
     tracklets = read_tracklets(tracklets_path) if tracklets_path.is_file() else None
     g = None

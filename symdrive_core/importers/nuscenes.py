@@ -254,9 +254,9 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
         first = grouped.table[0]
         for v in first:  # read for their colours before the package checks them
             check_image(v.image, v.width, v.height, v.source, v.where)
-        points, colors, point_frames = seen_returns(scans, world_from_lidar, to_camera[grouped.cameras[0]], first[0].K,
-                                      first[0].width, first[0].height, [v.image for v in first],
-                                      config.lidar_points, config.lidar.min_depth_m)
+        points, colors, point_frames = seen_returns(
+            scans, world_from_lidar, to_camera[grouped.cameras[0]], first[0].K, first[0].width,
+            first[0].height, [v.image for v in first], config.lidar_points, config.lidar.min_depth_m)
     tracks, instances = _tracks(tables, frames, tuple(config.categories))
     log, _ = tables.follow(scenes, scene_token, "log_token", "log")
     g = None

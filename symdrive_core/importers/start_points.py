@@ -15,6 +15,7 @@ The ground is fitted to the returns alone, which are metric and dense on the roa
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,8 +55,6 @@ def start_points(src: Source, near: Path, heldout_every: int | None, cfg: StartP
     out, a source without points or splats (and with images) given triangulated ones, a drive's
     returns joined by those beyond their reach; ``log`` says what was done (a line each).
     Triangulation works beside ``near``."""
-    import time
-
     train = training_frames(src, heldout_every)
     dropped = drop_heldout_returns(src, train)
     if dropped:
@@ -92,6 +91,8 @@ def nearest_distance(points: np.ndarray, to: np.ndarray, chunk: int = 256) -> np
     directly rather than through the matrix-product expansion, exact far from the origin)."""
     import torch
 
+    if len(to) == 0:
+        return np.full(len(points), np.inf)
     q, ref = torch.from_numpy(np.asarray(points, np.float64)), torch.from_numpy(np.asarray(to, np.float64))
     out = torch.empty(len(q), dtype=torch.float64)
     for s in range(0, len(q), chunk):

@@ -21,6 +21,8 @@ def test_nearest_distance_is_the_float64_brute_force_far_from_the_origin():
     q = rng.uniform(-50, 50, (700, 3)) + offset
     oracle = np.sqrt(((q[:, None, :] - ref[None, :, :]) ** 2).sum(-1)).min(1)
     np.testing.assert_allclose(nearest_distance(q, ref, chunk=128), oracle, rtol=1e-12, atol=1e-9)
+    assert np.isinf(nearest_distance(q, ref[:0])).all()  # no return at all: every point is beyond reach
+    assert nearest_distance(q[:0], ref).shape == (0,)
 
 
 def test_held_out_frames_returns_are_dropped_with_their_colours():
