@@ -95,3 +95,25 @@ def test_returns_alone_when_asked(demo_drive, tmp_path, monkeypatch):
     n = len(demo_drive.points)
     sp.start_points(demo_drive, tmp_path / "out", None, StartPointsConfig(triangulate_beyond_lidar=False))
     assert len(demo_drive.points) == n
+
+
+def test_the_ground_is_fitted_to_the_returns_alone(demo_drive, tmp_path, monkeypatch):
+    """Joined points (of no frame, -1) start the reconstruction but the ground fit sees the
+    returns only."""
+    from symdrive_core.importers import package
+    from symdrive_core.importers.package import Options, write_package
+
+    seen = {}
+
+    def spy(points, *args, **kwargs):
+        seen["points"] = points
+        raise RuntimeError("stop after the ground fit's input")
+
+    n = len(demo_drive.points)
+    demo_drive.points = np.concatenate([demo_drive.points, demo_drive.points[:5] + 30.0])
+    demo_drive.colors = np.concatenate([demo_drive.colors, demo_drive.colors[:5]])
+    demo_drive.point_frames = np.concatenate([demo_drive.point_frames, np.full(5, -1)])
+    monkeypatch.setattr(package, "align", spy)
+    with pytest.raises(RuntimeError, match="ground fit"):
+        write_package(demo_drive, Options(out=tmp_path / "pkg"), progress=False)
+    np.testing.assert_array_equal(seen["points"], demo_drive.points[:n])
