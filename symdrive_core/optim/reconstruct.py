@@ -152,14 +152,8 @@ def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructCon
     sp, sc = sky_points(views, cfg.sky_points, dome_radius(views), rng, pts if cfg.sky.skyline else None, cfg.sky)
     pts, cols = np.concatenate([pts, sp]), np.concatenate([cols, sc])
     n = len(pts)
-    scale = knn_scale(pts)
-    return Gaussians(
-        means=pts.astype(np.float32),
-        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-        log_scales=np.repeat(np.log(scale)[:, None], 3, 1).astype(np.float32),
-        opacity_logits=np.full(n, np.log(cfg.init_opacity / (1 - cfg.init_opacity)), np.float32),
-        sh=rgb_to_sh_dc(cols)[:, None, :].astype(np.float32),
-    )
+    return Gaussians.from_activated(pts, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), np.repeat(knn_scale(pts)[:, None], 3, 1),
+                                    np.full(n, cfg.init_opacity), cols)
 
 
 # ------------------------------------------------------------------ optimisation
