@@ -34,6 +34,18 @@ class PoseRefineConfig:
     smooth_order: int = 2  # the difference smoothed: 2 acceleration, 3 jerk (a steady turn or lane change costs nothing)
     smooth_m: float = 0.05  # a difference of the trajectory this large costs as a prior_m correction
     smooth_rad: float = 0.01
+    # The four scales above estimated from each track itself (:mod:`.track_noise`): a tracker's error
+    # and a car's changes of motion differ by track; the configured ones stay where a track is too
+    # short to tell them apart. False: the configured ones for every track.
+    scales_from_track: bool = True
+    noise_floor_m: float = 0.01  # the estimated scales are at least these
+    noise_floor_rad: float = 0.002
+    smooth_floor_m: float = 0.005
+    smooth_floor_rad: float = 0.001
+    # A car moves where it points: the sideways part of its move between consecutive frames, at
+    # the pair's mean heading, costs as a prior_m correction at this size (metres; 0: off). It ties
+    # each box's heading to its path, so neither is smoothed alone.
+    slip_m: float = 0.02
     weight: float = 1e-3  # of the priors against one view's photometric loss
 
 

@@ -18,7 +18,15 @@ fitted jointly with the Gaussians (the rendered image's gradient reaches it thro
   frame without an image (held out) is placed by this term alone, between its neighbours.
   ``smooth_order`` 3 smooths the third difference (jerk) instead, which a steady lane change or
   turn does not pay; measured on jittered boxes it frees a lane-changing car and loosens the
-  hold on straight ones about as much (docs/results.md), so 2 stays the default.
+  hold on straight ones about as much (docs/results.md), so 2 stays the default;
+* **a car moves where it points** (``slip_m``): the sideways part of the move between consecutive
+  frames, ``|(T_{f+1} - T_f) x h((psi_f + psi_{f+1}) / 2)|^2 / slip_m^2`` with ``h`` the heading's
+  horizontal unit vector, as a unicycle model has it: the heading is then tied to the path, and a
+  tracker's heading error (degrees, per frame) to the path's direction over many frames.
+
+The scales ``prior_m`` and ``smooth_m`` (and their yaw twins) are by default estimated from each
+track itself (:mod:`.track_noise`: how much its boxes jitter, how smoothly its vehicle moves), so a
+car holding its lane is held to a line and one changing lanes is let change them.
 
 The smoothness links consecutive frames of one *piece* of a track only: a frame without a box, or
 a frame the tracks import reported (a jump, a turn or a size change between consecutive boxes,
@@ -45,6 +53,7 @@ from ..rotations import matrix_to_quat
 from ..scene import Manifest
 from ..scene.poses import Pose, yaw_of
 from .config import PoseRefineConfig
+from .track_noise import estimate_scales
 
 POSES_FILE = "poses.json"  # the refined poses, beside the reconstruction's actors/<id>.ply
 
@@ -86,6 +95,22 @@ def pieces(frames: list[int], cuts: set[int]) -> list[list[int]]:
     return out
 
 
+def track_scales(centres: np.ndarray, yaw: np.ndarray, runs: list[list[int]], cfg: PoseRefineConfig) -> dict:
+    """The priors' scales for one track (``prior_m``, ``smooth_m``, ``prior_rad``, ``smooth_rad``):
+    estimated from its horizontal centres and unwrapped yaw along its pieces (rows ``runs``) with
+    ``cfg.scales_from_track``, else (or where its pieces are too short) the configured ones."""
+    out = {"prior_m": cfg.prior_m, "smooth_m": cfg.smooth_m, "prior_rad": cfg.prior_rad, "smooth_rad": cfg.smooth_rad}
+    if not cfg.scales_from_track:
+        return out
+    xy = estimate_scales([centres[run, :2] for run in runs], cfg.smooth_order, cfg.smooth_floor_m, cfg.noise_floor_m)
+    turn = estimate_scales([yaw[run] for run in runs], cfg.smooth_order, cfg.smooth_floor_rad, cfg.noise_floor_rad)
+    if xy is not None:
+        out.update(prior_m=xy.noise, smooth_m=xy.motion)
+    if turn is not None:
+        out.update(prior_rad=turn.noise, smooth_rad=turn.motion)
+    return out
+
+
 def _yaw_matrix(psi: torch.Tensor) -> torch.Tensor:
     c, s = torch.cos(psi), torch.sin(psi)
     z, o = torch.zeros_like(psi), torch.ones_like(psi)
@@ -109,6 +134,7 @@ class PoseRefinement:
         for run in self.pieces:  # differences along a piece must not see a wrap at +-pi
             yaw[run] = np.unwrap(yaw[run])
         self.base_yaw = torch.tensor(yaw, dtype=torch.float64)
+        self.scales = track_scales(self.base_T.numpy(), yaw, self.pieces, cfg)
         self.dt = torch.nn.Parameter(torch.zeros(len(present), 3, dtype=torch.float64))
         self.dyaw = torch.nn.Parameter(torch.zeros(len(present), dtype=torch.float64))
         self.opt = torch.optim.Adam([{"params": [self.dt], "lr": cfg.lr_m, "name": "dt"},
@@ -121,15 +147,19 @@ class PoseRefinement:
 
     def penalty(self, n_views: int) -> torch.Tensor:
         """The priors of the corrections (towards the track, smooth in time), per training view."""
-        c = self.cfg
-        prior = (self.dt.pow(2).sum() / c.prior_m ** 2 + self.dyaw.pow(2).sum() / c.prior_rad ** 2)
+        c, s = self.cfg, self.scales
+        prior = (self.dt.pow(2).sum() / s["prior_m"] ** 2 + self.dyaw.pow(2).sum() / s["prior_rad"] ** 2)
         T, yaw = self.base_T + self.dt, self.base_yaw + self.dyaw
         smooth = torch.zeros((), dtype=torch.float64)
         for run in self.pieces:
+            idx = torch.tensor(run)
             if len(run) > c.smooth_order:
-                idx = torch.tensor(run)
-                smooth = smooth + torch.diff(T[idx], c.smooth_order, dim=0).pow(2).sum() / c.smooth_m ** 2
-                smooth = smooth + torch.diff(yaw[idx], c.smooth_order).pow(2).sum() / c.smooth_rad ** 2
+                smooth = smooth + torch.diff(T[idx], c.smooth_order, dim=0).pow(2).sum() / s["smooth_m"] ** 2
+                smooth = smooth + torch.diff(yaw[idx], c.smooth_order).pow(2).sum() / s["smooth_rad"] ** 2
+            if c.slip_m > 0 and len(run) > 1:
+                move, heading = torch.diff(T[idx], dim=0), 0.5 * (yaw[idx][1:] + yaw[idx][:-1])
+                sideways = move[:, 1] * torch.cos(heading) - move[:, 0] * torch.sin(heading)
+                smooth = smooth + sideways.pow(2).sum() / c.slip_m ** 2
         return c.weight * (prior + smooth) / max(n_views, 1)
 
     def step(self, it: int) -> None:
@@ -152,7 +182,8 @@ class PoseRefinement:
         dt = self.dt.detach().norm(dim=1).numpy() * 100
         dyaw = np.degrees(np.abs(self.dyaw.detach().numpy()))
         return {"mean_cm": round(float(dt.mean()), 2), "max_cm": round(float(dt.max()), 2),
-                "mean_deg": round(float(dyaw.mean()), 3), "max_deg": round(float(dyaw.max()), 3)}
+                "mean_deg": round(float(dyaw.mean()), 3), "max_deg": round(float(dyaw.max()), 3),
+                "scales": {k: round(v, 5) for k, v in self.scales.items()}}
 
     # checkpoints: the corrections and their Adam state, so a resumed fit continues them
 

@@ -1,0 +1,63 @@
+"""How much a track jitters and how smoothly its vehicle moves, estimated from the track alone.
+
+A pose refinement pulls each box towards the track at the track's error scale and smooths the
+trajectory at the scale of the vehicle's real changes of motion (:mod:`.pose_refine`). Neither is
+known in advance and they differ by track: a tracker's error differs by detector and distance, a
+car holding its lane barely accelerates, one changing lanes does by metres per second squared.
+Both come out of the track itself under the model the refinement's priors assume,
+
+    y_f = x_f + n_f,   n_f ~ N(0, s_noise^2)        (the boxes: the path plus the track's error)
+    D^k x ~ N(0, s_motion^2 I)                      (the path's k-th differences: its changes of motion)
+
+by restricted maximum likelihood: the k-th differences of the boxes, ``z = D^k y``, do not depend
+on the path's unknown start (its position, velocity), and are Gaussian with covariance
+``s_motion^2 I + s_noise^2 D^k D^k^T``. Diagonalised once per piece length (``D D^T = U L U^T``),
+the negative log-likelihood is ``sum_i log v_i + (U^T z)_i^2 / v_i`` with ``v_i = s_motion^2 +
+s_noise^2 L_i``, minimised over a grid of both scales (log-spaced, about 6 % apart). Each axis of the
+track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's pieces (runs of
+consecutive frames) add up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+GRID_STEPS = 120  # per scale, log-spaced between its floor and CEILING
+CEILING = 10.0  # metres (or radians) per frame^k: no real track's scale reaches it
+
+
+@dataclass(frozen=True)
+class TrackScales:
+    """One track axis group's estimated scales (metres or radians; motion per frame^order)."""
+
+    motion: float
+    noise: float
+
+
+def estimate_scales(pieces: list[np.ndarray], order: int, motion_floor: float,
+                    noise_floor: float) -> TrackScales | None:
+    """The restricted maximum-likelihood scales of ``pieces`` (each ``[n, k]``: ``n`` consecutive
+    frames of ``k`` axes that share the scales), each at least its floor; None where no piece is
+    longer than ``order + 1`` frames (too short to tell motion from noise)."""
+    spectra = []
+    for y in pieces:
+        y = np.asarray(y, dtype=np.float64).reshape(len(y), -1)
+        n = len(y)
+        if n <= order + 1:
+            continue
+        D = np.diff(np.eye(n), order, axis=0)
+        lam, U = np.linalg.eigh(D @ D.T)
+        z2 = ((U.T @ (D @ y)) ** 2).sum(axis=1)  # summed over the axes sharing the scales
+        spectra.append((lam, z2, y.shape[1]))
+    if not spectra:
+        return None
+    motion = np.geomspace(motion_floor, CEILING, GRID_STEPS)
+    noise = np.geomspace(noise_floor, CEILING, GRID_STEPS)
+    nll = np.zeros((GRID_STEPS, GRID_STEPS))
+    for lam, z2, axes in spectra:
+        v = motion[:, None, None] ** 2 + noise[None, :, None] ** 2 * lam[None, None, :]
+        nll += (axes * np.log(v) + z2 / v).sum(axis=2)
+    i, j = np.unravel_index(np.argmin(nll), nll.shape)
+    return TrackScales(float(motion[i]), float(noise[j]))
