@@ -57,7 +57,8 @@ def estimate_scales(pieces: list[np.ndarray], order: int, motion_floor: float,
     noise = np.geomspace(noise_floor, CEILING, GRID_STEPS)
     nll = np.zeros((GRID_STEPS, GRID_STEPS))
     for lam, z2, axes in spectra:
-        v = motion[:, None, None] ** 2 + noise[None, :, None] ** 2 * lam[None, None, :]
-        nll += (axes * np.log(v) + z2 / v).sum(axis=2)
+        for i, m in enumerate(motion):  # a row at a time: a long track's spectrum stays small
+            v = m * m + noise[:, None] ** 2 * lam[None, :]
+            nll[i] += (axes * np.log(v) + z2 / v).sum(axis=1)
     i, j = np.unravel_index(np.argmin(nll), nll.shape)
     return TrackScales(float(motion[i]), float(noise[j]))
