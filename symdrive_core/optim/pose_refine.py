@@ -135,6 +135,7 @@ class PoseRefinement:
             yaw[run] = np.unwrap(yaw[run])
         self.base_yaw = torch.tensor(yaw, dtype=torch.float64)
         self.scales = track_scales(self.base_T.numpy(), yaw, self.pieces, cfg)
+        self.piece_rows = [torch.tensor(run) for run in self.pieces]  # made once: the priors run every step
         self.dt = torch.nn.Parameter(torch.zeros(len(present), 3, dtype=torch.float64))
         self.dyaw = torch.nn.Parameter(torch.zeros(len(present), dtype=torch.float64))
         self.opt = torch.optim.Adam([{"params": [self.dt], "lr": cfg.lr_m, "name": "dt"},
@@ -151,13 +152,13 @@ class PoseRefinement:
         prior = (self.dt.pow(2).sum() / s["prior_m"] ** 2 + self.dyaw.pow(2).sum() / s["prior_rad"] ** 2)
         T, yaw = self.base_T + self.dt, self.base_yaw + self.dyaw
         smooth = torch.zeros((), dtype=torch.float64)
-        for run in self.pieces:
-            idx = torch.tensor(run)
-            if len(run) > c.smooth_order:
-                smooth = smooth + torch.diff(T[idx], c.smooth_order, dim=0).pow(2).sum() / s["smooth_m"] ** 2
-                smooth = smooth + torch.diff(yaw[idx], c.smooth_order).pow(2).sum() / s["smooth_rad"] ** 2
-            if c.slip_m > 0 and len(run) > 1:
-                move, heading = torch.diff(T[idx], dim=0), 0.5 * (yaw[idx][1:] + yaw[idx][:-1])
+        for idx in self.piece_rows:
+            Ti, yi = T[idx], yaw[idx]
+            if len(idx) > c.smooth_order:
+                smooth = smooth + torch.diff(Ti, c.smooth_order, dim=0).pow(2).sum() / s["smooth_m"] ** 2
+                smooth = smooth + torch.diff(yi, c.smooth_order).pow(2).sum() / s["smooth_rad"] ** 2
+            if c.slip_m > 0 and len(idx) > 1:
+                move, heading = torch.diff(Ti, dim=0), 0.5 * (yi[1:] + yi[:-1])
                 sideways = move[:, 1] * torch.cos(heading) - move[:, 0] * torch.sin(heading)
                 smooth = smooth + sideways.pow(2).sum() / c.slip_m ** 2
         return c.weight * (prior + smooth) / max(n_views, 1)
