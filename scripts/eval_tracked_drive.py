@@ -3,7 +3,7 @@ labels' own 2D boxes give the vehicles that drive, and elsewhere.
 
     symdrive import kitti-raw 2011_09_26/2011_09_26_drive_0009_sync --out drive --heldout-every 5 --copy-images
     symdrive import tracks drive label_02/0001.txt --calib calib/0001.txt
-    symdrive reconstruct drive --out fits/static --no-link --no-decompose
+    symdrive reconstruct drive --out fits/static --no-link --static
     symdrive reconstruct drive --out fits/boxes --no-link --no-refine-poses
     symdrive reconstruct drive --out fits/refined --no-link
     python scripts/eval_tracked_drive.py drive label_02/0001.txt \\

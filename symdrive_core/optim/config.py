@@ -48,6 +48,10 @@ class PoseRefineConfig:
     # the pair's mean heading, costs as a prior_m correction at this size (metres; 0: off). It ties
     # each box's heading to its path, so neither is smoothed alone.
     slip_m: float = 0.02
+    # With the slip, a moving track's heading error is at least how far its boxes' headings turn
+    # from its path: the angle to the chord of at least this length centred on each box (metres;
+    # 0: off). A heading set by hand can be degrees off yet smooth, which its differences miss.
+    heading_chord_m: float = 4.0
     weight: float = 1e-3  # of the priors against one view's photometric loss
 
 

@@ -53,7 +53,7 @@ from ..rotations import matrix_to_quat
 from ..scene import Manifest
 from ..scene.poses import Pose, yaw_of
 from .config import PoseRefineConfig
-from .track_noise import estimate_scales
+from .track_noise import estimate_scales, heading_disagreement
 
 POSES_FILE = "poses.json"  # the refined poses, beside the reconstruction's actors/<id>.ply
 
@@ -108,6 +108,11 @@ def track_scales(centres: np.ndarray, yaw: np.ndarray, runs: list[list[int]], cf
         out.update(prior_m=xy.noise, smooth_m=xy.motion)
     if turn is not None:
         out.update(prior_rad=turn.noise, smooth_rad=turn.motion)
+    if cfg.slip_m > 0 and cfg.heading_chord_m > 0:
+        off_path = heading_disagreement([centres[run, :2] for run in runs], [yaw[run] for run in runs],
+                                        cfg.heading_chord_m)
+        if off_path is not None:
+            out["prior_rad"] = max(out["prior_rad"], off_path)
     return out
 
 

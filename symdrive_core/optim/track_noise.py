@@ -13,7 +13,8 @@ by restricted maximum likelihood: the k-th differences of the boxes, ``z = D^k y
 on the path's unknown start (its position, velocity), and are Gaussian with covariance
 ``s_motion^2 I + s_noise^2 D^k D^k^T``. Diagonalised once per piece length (``D D^T = U L U^T``),
 the negative log-likelihood is ``sum_i log v_i + (U^T z)_i^2 / v_i`` with ``v_i = s_motion^2 +
-s_noise^2 L_i``, minimised over a grid of both scales (log-spaced, about 6 % apart). Each axis of the
+s_noise^2 L_i``, minimised over a grid of both scales (log-spaced, about 6 % apart; one grid for
+every floor, each scale's floor its lowest point, so a floor below an estimate never moves it). Each axis of the
 track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's pieces (runs of
 consecutive frames) add up.
 """
@@ -24,8 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GRID_STEPS = 120  # per scale, log-spaced between its floor and CEILING
 CEILING = 10.0  # metres (or radians) per frame^k: no real track's scale reaches it
+GRID = np.geomspace(1e-4, CEILING, 200)  # each scale's candidates, about 6 % apart
+
+
+def scale_grid(floor: float) -> np.ndarray:
+    """The candidates of one scale: ``floor`` and every point of :data:`GRID` above it."""
+    return np.concatenate([[floor], GRID[GRID > floor]])
 
 
 @dataclass(frozen=True)
@@ -53,12 +59,31 @@ def estimate_scales(pieces: list[np.ndarray], order: int, motion_floor: float,
         spectra.append((lam, z2, y.shape[1]))
     if not spectra:
         return None
-    motion = np.geomspace(motion_floor, CEILING, GRID_STEPS)
-    noise = np.geomspace(noise_floor, CEILING, GRID_STEPS)
-    nll = np.zeros((GRID_STEPS, GRID_STEPS))
+    motion, noise = scale_grid(motion_floor), scale_grid(noise_floor)
+    nll = np.zeros((len(motion), len(noise)))
     for lam, z2, axes in spectra:
         for i, m in enumerate(motion):  # a row at a time: a long track's spectrum stays small
             v = m * m + noise[:, None] ** 2 * lam[None, :]
             nll[i] += (axes * np.log(v) + z2 / v).sum(axis=1)
     i, j = np.unravel_index(np.argmin(nll), nll.shape)
     return TrackScales(float(motion[i]), float(noise[j]))
+
+
+def heading_disagreement(centres: list[np.ndarray], headings: list[np.ndarray], chord_m: float) -> float | None:
+    """The RMS angle (modulo pi: the slip cannot tell forwards from backwards) between each box's
+    heading and its path: the chord of the shortest span of at least ``chord_m`` metres centred on
+    it (clipped at the piece's ends), over the pieces' ``[n, 2]`` centres and ``[n]`` headings;
+    None where fewer than three boxes have such a chord (a parked or crawling vehicle)."""
+    angles = []
+    for xy, yaw in zip(centres, headings):
+        n = len(xy)
+        for f in range(n):
+            for k in range(1, n):
+                a, b = max(f - k, 0), min(f + k, n - 1)
+                chord = xy[b] - xy[a]
+                if np.hypot(*chord) >= chord_m or (a == 0 and b == n - 1):
+                    break
+            if n > 1 and np.hypot(*chord) >= chord_m:
+                angle = np.arctan2(chord[1], chord[0]) - yaw[f]
+                angles.append((angle + np.pi / 2) % np.pi - np.pi / 2)
+    return float(np.sqrt(np.mean(np.square(angles)))) if len(angles) >= 3 else None

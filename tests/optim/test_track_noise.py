@@ -6,9 +6,10 @@ where they must."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from symdrive_core.optim import track_noise
-from symdrive_core.optim.track_noise import estimate_scales
+from symdrive_core.optim.track_noise import estimate_scales, heading_disagreement
 
 
 def _simulated(rng, n_frames: int, motion: float, noise: float, order: int, axes: int) -> np.ndarray:
@@ -25,15 +26,13 @@ def test_the_estimate_is_the_dense_likelihoods_grid_minimum():
     rng = np.random.default_rng(4)
     pieces = [_simulated(rng, 9, 0.05, 0.1, 2, 2), _simulated(rng, 6, 0.05, 0.1, 2, 2)]
     floors = (0.005, 0.01)
-    steps = track_noise.GRID_STEPS
-    motion = np.geomspace(floors[0], track_noise.CEILING, steps)
-    noise = np.geomspace(floors[1], track_noise.CEILING, steps)
+    motion, noise = track_noise.scale_grid(floors[0]), track_noise.scale_grid(floors[1])
     a2, s2 = (motion ** 2)[:, None, None, None], (noise ** 2)[None, :, None, None]
-    nll = np.zeros((steps, steps))
+    nll = np.zeros((len(motion), len(noise)))
     for y in pieces:
         D = np.diff(np.eye(len(y)), 2, axis=0)
         cov = a2 * np.eye(len(D)) + s2 * (D @ D.T)
-        z = np.broadcast_to(D @ y, (steps, steps, len(D), y.shape[1]))
+        z = np.broadcast_to(D @ y, (len(motion), len(noise), len(D), y.shape[1]))
         nll += y.shape[1] * np.linalg.slogdet(cov)[1] + np.sum(z * np.linalg.solve(cov, z), axis=(2, 3))
     i, j = np.unravel_index(np.argmin(nll), nll.shape)
     got = estimate_scales(pieces, 2, *floors)
@@ -64,3 +63,28 @@ def test_the_hard_cases():
     assert got.motion < 0.01 and abs(got.noise / 0.1 - 1) < 0.15, got
     assert estimate_scales([line[:3]], 2, 0.005, 0.01) is None
     assert estimate_scales([line[:4]], 2, 0.005, 0.01) is not None
+
+
+def test_a_floor_below_the_estimate_leaves_it_where_it_is():
+    """The grid is one for every floor: raising the error's floor from 1 to 10 cm under a track
+    jittering by 20 cm changes nothing; raised above the jitter, the estimate sits on the floor."""
+    rng = np.random.default_rng(2)
+    pieces = [_simulated(rng, 25, 0.02, 0.2, 2, 2) for _ in range(6)]
+    low, high = estimate_scales(pieces, 2, 0.005, 0.01), estimate_scales(pieces, 2, 0.005, 0.1)
+    assert low == high and low.noise > 0.1
+    assert estimate_scales(pieces, 2, 0.005, 0.5).noise == 0.5
+
+
+
+def test_a_heading_off_its_path_is_measured_against_the_chord():
+    """Boxes driving along x with every heading 5 degrees off (a hand-set heading, smooth, whose
+    differences see nothing): 5 degrees; turned by pi (a label pointing backwards, which the slip
+    cannot tell) or on its path: zero; a parked car's boxes never span the chord: no estimate."""
+    x = np.arange(30.0) * 0.6
+    xy = np.stack([x, 0.01 * np.sin(x)], axis=1)
+    off = np.full(30, np.radians(5.0))
+    assert abs(heading_disagreement([xy], [off], 4.0) - np.radians(5.0)) < 1e-3
+    assert heading_disagreement([xy], [off + np.pi], 4.0) == pytest.approx(np.radians(5.0), abs=1e-3)
+    assert heading_disagreement([xy], [np.zeros(30)], 4.0) < 0.005  # the path wiggles by a centimetre
+    parked = np.random.default_rng(0).normal(0.0, 0.03, size=(30, 2))
+    assert heading_disagreement([parked], [np.zeros(30)], 4.0) is None
