@@ -76,14 +76,14 @@ def heading_disagreement(centres: list[np.ndarray], headings: list[np.ndarray], 
     None where fewer than three boxes have such a chord (a parked or crawling vehicle)."""
     angles = []
     for xy, yaw in zip(centres, headings):
-        n = len(xy)
-        for f in range(n):
-            for k in range(1, n):
-                a, b = max(f - k, 0), min(f + k, n - 1)
-                chord = xy[b] - xy[a]
-                if np.hypot(*chord) >= chord_m or (a == 0 and b == n - 1):
-                    break
-            if n > 1 and np.hypot(*chord) >= chord_m:
-                angle = np.arctan2(chord[1], chord[0]) - yaw[f]
-                angles.append((angle + np.pi / 2) % np.pi - np.pi / 2)
+        xy, n = np.asarray(xy, dtype=np.float64), len(xy)
+        frame = np.arange(n)
+        chord = np.full((n, 2), np.nan)
+        for k in range(1, n):  # spans widened for every box at once: a long parked track stays fast
+            d = xy[np.minimum(frame + k, n - 1)] - xy[np.maximum(frame - k, 0)]
+            reached = np.isnan(chord[:, 0]) & (np.hypot(d[:, 0], d[:, 1]) >= chord_m)
+            chord[reached] = d[reached]
+        found = ~np.isnan(chord[:, 0])
+        angle = np.arctan2(chord[found, 1], chord[found, 0]) - np.asarray(yaw)[found]
+        angles.extend((angle + np.pi / 2) % np.pi - np.pi / 2)
     return float(np.sqrt(np.mean(np.square(angles)))) if len(angles) >= 3 else None
