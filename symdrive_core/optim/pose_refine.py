@@ -26,7 +26,11 @@ fitted jointly with the Gaussians (the rendered image's gradient reaches it thro
 
 The scales ``prior_m`` and ``smooth_m`` (and their yaw twins) are by default estimated from each
 track itself (:mod:`.track_noise`: how much its boxes jitter, how smoothly its vehicle moves), so a
-car holding its lane is held to a line and one changing lanes is let change them.
+car holding its lane is held to a line and one changing lanes is let change them. A heading set by
+hand (one number for a whole track, as KITTI's labels have it) is smooth and can still be degrees
+off its path; with the slip, the heading's error scale is at least its angle to the track's
+chords (``heading_chord_m``), so the slip turns such a heading onto the path rather than drag the
+path after it.
 
 The smoothness links consecutive frames of one *piece* of a track only: a frame without a box, or
 a frame the tracks import reported (a jump, a turn or a size change between consecutive boxes,
@@ -98,7 +102,9 @@ def pieces(frames: list[int], cuts: set[int]) -> list[list[int]]:
 def track_scales(centres: np.ndarray, yaw: np.ndarray, runs: list[list[int]], cfg: PoseRefineConfig) -> dict:
     """The priors' scales for one track (``prior_m``, ``smooth_m``, ``prior_rad``, ``smooth_rad``):
     estimated from its horizontal centres and unwrapped yaw along its pieces (rows ``runs``) with
-    ``cfg.scales_from_track``, else (or where its pieces are too short) the configured ones."""
+    ``cfg.scales_from_track``, else (or where its pieces are too short) the configured ones; with
+    the slip, the heading's error is at least its angle to the track's own path (a hand-set
+    heading can be degrees off and smooth)."""
     out = {"prior_m": cfg.prior_m, "smooth_m": cfg.smooth_m, "prior_rad": cfg.prior_rad, "smooth_rad": cfg.smooth_rad}
     if not cfg.scales_from_track:
         return out

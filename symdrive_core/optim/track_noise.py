@@ -14,9 +14,14 @@ on the path's unknown start (its position, velocity), and are Gaussian with cova
 ``s_motion^2 I + s_noise^2 D^k D^k^T``. Diagonalised once per piece length (``D D^T = U L U^T``),
 the negative log-likelihood is ``sum_i log v_i + (U^T z)_i^2 / v_i`` with ``v_i = s_motion^2 +
 s_noise^2 L_i``, minimised over a grid of both scales (log-spaced, about 6 % apart; one grid for
-every floor, each scale's floor its lowest point, so a floor below an estimate never moves it). Each axis of the
-track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's pieces (runs of
+every floor, each scale's floor its lowest point, so a floor below an estimate never moves it).
+Each axis of the track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's pieces (runs of
 consecutive frames) add up.
+
+The model sees an error that changes from frame to frame, not one that changes smoothly: labels
+set by hand at key frames and interpolated between have no differences between the key frames,
+and a heading set once for a whole track none at all. The heading's error is therefore also
+measured against the track's own path (:func:`heading_disagreement`).
 """
 
 from __future__ import annotations
