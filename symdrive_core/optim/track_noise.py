@@ -15,8 +15,8 @@ on the path's unknown start (its position, velocity), and are Gaussian with cova
 the negative log-likelihood is ``sum_i log v_i + (U^T z)_i^2 / v_i`` with ``v_i = s_motion^2 +
 s_noise^2 L_i``, minimised over a grid of both scales (log-spaced, about 6 % apart; one grid for
 every floor, each scale's floor its lowest point, so a floor below an estimate never moves it).
-Each axis of the track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's pieces (runs of
-consecutive frames) add up.
+Each axis of the track (x and y sharing scales; the yaw apart) is a column of ``y``; a track's
+pieces (runs of consecutive frames) add up.
 
 The model sees an error that changes from frame to frame, not one that changes smoothly: labels
 set by hand at key frames and interpolated between have no differences between the key frames,
