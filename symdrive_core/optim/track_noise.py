@@ -88,6 +88,8 @@ def heading_disagreement(centres: list[np.ndarray], headings: list[np.ndarray], 
             d = xy[np.minimum(frame + k, n - 1)] - xy[np.maximum(frame - k, 0)]
             reached = np.isnan(chord[:, 0]) & (np.hypot(d[:, 0], d[:, 1]) >= chord_m)
             chord[reached] = d[reached]
+            if not np.isnan(chord[:, 0]).any():
+                break
         found = ~np.isnan(chord[:, 0])
         angle = np.arctan2(chord[found, 1], chord[found, 0]) - np.asarray(yaw)[found]
         angles.extend((angle + np.pi / 2) % np.pi - np.pi / 2)
