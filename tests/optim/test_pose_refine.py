@@ -137,7 +137,6 @@ def test_the_priors_scales_follow_each_track():
     assert scales["lane change"]["smooth_rad"] > 4 * scales["straight"]["smooth_rad"]
 
 
-
 def test_a_heading_set_off_the_path_turns_onto_it():
     """A car driving straight along x whose boxes all point 6 degrees off it (as hand-set headings
     are: smooth, so their differences put the error at its floor), the centres 2 cm off: with the
@@ -156,6 +155,7 @@ def test_a_heading_set_off_the_path_turns_onto_it():
         if chord:
             assert abs(r.scales["prior_rad"] - np.radians(6.0)) < 0.005, r.scales
     assert abs(heading[PoseRefineConfig().heading_chord_m]) < 1.0 and heading[0.0] > 5.5, heading
+
 
 def test_refined_poses_become_the_recorded_poses_and_the_tracks_boxes_are_kept(moving_box, tmp_path):
     root = tmp_path / "pkg"

@@ -75,11 +75,11 @@ def test_a_floor_below_the_estimate_leaves_it_where_it_is():
     assert estimate_scales(pieces, 2, 0.005, 0.5).noise == 0.5
 
 
-
 def test_a_heading_off_its_path_is_measured_against_the_chord():
     """Boxes driving along x with every heading 5 degrees off (a hand-set heading, smooth, whose
     differences see nothing): 5 degrees; turned by pi (a label pointing backwards, which the slip
-    cannot tell) or on its path: zero; a parked car's boxes never span the chord: no estimate."""
+    cannot tell): the same; on its path: zero; a parked car's boxes never span the chord: no
+    estimate."""
     x = np.arange(30.0) * 0.6
     xy = np.stack([x, 0.01 * np.sin(x)], axis=1)
     off = np.full(30, np.radians(5.0))
