@@ -114,7 +114,7 @@ class ReconstructConfig:
     seed: int = 0
     # Recorded vehicles (existing actors with a box) fitted in their own frames; off: one static scene.
     decompose: bool = True
-    actor_points: int = 3000  # initial Gaussians per recorded vehicle, on its box's faces
+    actor_points: int = 3000  # initial Gaussians per recorded vehicle: its measured surface, then its box's faces
     actor_max_gaussians: int = 40_000
     pose_refine: PoseRefineConfig = field(default_factory=PoseRefineConfig)
     # Where the scene has a sun, each recorded vehicle's shadow is a layer fitted with the

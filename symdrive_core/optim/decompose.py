@@ -5,7 +5,9 @@ A static 3DGS smears a moving car along its path. Instead each ``existing`` acto
 frame by ``mu_w = R(t) mu_l + T(t)`` (:mod:`symdrive_core.splat.compose`), and fitted jointly with
 the background. Two rules keep the roles apart: a vehicle's Gaussians stay inside its (padded) box,
 and the background keeps none inside the volume any recorded box sweeps (above a thin layer of
-road under the wheels), so the background cannot learn a car.
+road under the wheels), so the background cannot learn a car. A vehicle starts where the training
+views' depth measured its surface, each return carried into its frame by the box of the frame that
+measured it (the points the background may not keep), and on its box's faces where nothing did.
 """
 
 from __future__ import annotations
@@ -14,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..gaussians import Gaussians, rgb_to_sh_dc
+from ..conventions import pixel_rays_camera
 from ..scene import Actor, Manifest
+from ..scene.depth import measured
 from ..scene.poses import Pose
 
 BOX_PAD = 0.1  # a vehicle's Gaussians may reach 10 % beyond its box (mirrors, wheels, box error)
@@ -76,22 +79,44 @@ def in_swept_boxes(points: np.ndarray, tracks_: list[Track]) -> np.ndarray:
     return hit
 
 
-def box_gaussians(track: Track, n: int, rng: np.random.Generator) -> Gaussians:
-    """``n`` grey Gaussians on the faces of the track's box (a car's surface is near its box), in
-    its local frame, sized to their spacing (:func:`colour_from_views` colours them)."""
+def box_surface(track: Track, n: int, rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """``n`` points on the faces of the track's box (a car's surface is near its box), in its local
+    frame, and the Gaussian size their spacing gives (:func:`colour_from_views` colours them)."""
     half = track.half
     areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]]).repeat(2)
     face = rng.choice(6, n, p=areas / areas.sum())
     pts = rng.uniform(-1.0, 1.0, (n, 3)) * half * 0.95
     axis, sign = face // 2, np.where(face % 2 == 0, 1.0, -1.0)
     pts[np.arange(n), axis] = sign * half[axis] * 0.95
-    spacing = np.sqrt(2.0 * areas.sum() / n)
-    return Gaussians(
-        means=pts.astype(np.float32),
-        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-        log_scales=np.full((n, 3), np.log(0.5 * spacing), np.float32),
-        opacity_logits=np.zeros(n, np.float32),  # 0.5: a surface the fit can thin out or fill in
-        sh=rgb_to_sh_dc(np.full((n, 3), 0.5))[:, None, :].astype(np.float32))
+    return pts, 0.5 * float(np.sqrt(2.0 * areas.sum() / max(n, 1)))
+
+
+def measured_points(track: Track, views) -> tuple[np.ndarray, np.ndarray]:
+    """([M, 3] local points, [M, 3] colours): the depth pixels of the views (frame, K,
+    world_to_camera, image [H, W, 3], depth [H, W] with NaN / inf where nothing was measured) that
+    fall in the track's box at their own frame, above the road layer under it. Carried into the
+    vehicle's frame by the box of the frame that measured them, the returns on a car that drives
+    land on its surface as those of a parked one do (Street Gaussians starts each vehicle from its
+    LiDAR points); the pixel's colour is the surface's."""
+    pts, cols = [], []
+    reach = np.linalg.norm(track.half)
+    for frame, K, w2c, image, depth in views:
+        p = track.poses[frame] if frame < len(track.poses) else None
+        if p is None or depth is None:
+            continue
+        v, u = np.nonzero(measured(depth))
+        if not len(v):
+            continue
+        cam = pixel_rays_camera(K, u, v) * depth[v, u, None].astype(np.float64)
+        world = (cam - w2c[:3, 3]) @ w2c[:3, :3]
+        near = np.nonzero(np.abs(world - p.translation).max(1) <= reach)[0]
+        local = (world[near] - p.translation) @ p.R
+        inside = inside_box(local, track.half, pad=0.0, floor_m=ROAD_LAYER_M)
+        pts.append(local[inside])
+        cols.append(image[v[near[inside]], u[near[inside]]])
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate(pts), np.concatenate(cols).astype(np.float64)
 
 
 def colour_from_views(track: Track, local: np.ndarray, views) -> np.ndarray:

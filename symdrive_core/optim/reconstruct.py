@@ -27,7 +27,7 @@ import torch
 
 from ..conventions import pixel_rays_camera
 from ..errors import InputError
-from ..gaussians import Gaussians, rgb_to_sh_dc
+from ..gaussians import Gaussians
 from ..io.atomic import atomic_path, write_text_atomic
 from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
@@ -425,22 +425,38 @@ class ReconstructResult:
     exposure: dict[str, np.ndarray] = field(default_factory=dict)  # cameras' colour transforms [3, 4]
 
 
+def vehicle_start(track: decompose.Track, views: list[View], n: int, rng: np.random.Generator) -> Gaussians:
+    """``n`` start Gaussians of a recorded vehicle in its own frame: the surface its training views'
+    depth measured in its box (at most ``n`` of those points, sized as the background's start is),
+    the rest on the box's faces in the colours the views show there."""
+    pts, cols = decompose.measured_points(track, ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(),
+                                                   v.image.numpy(), v.depth.numpy()) for v in views if v.depth is not None))
+    if len(pts) > n:
+        keep = np.sort(rng.choice(len(pts), n, replace=False))
+        pts, cols = pts[keep], cols[keep]
+    if len(pts) < 4:  # too few to size by their neighbours
+        pts, cols = np.zeros((0, 3)), np.zeros((0, 3))
+    faces, size = decompose.box_surface(track, n - len(pts), rng)
+    seen = ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views)
+    face_cols = decompose.colour_from_views(track, faces, seen) if len(faces) else np.zeros((0, 3))
+    means = np.concatenate([pts, faces])
+    scales = np.concatenate([knn_scale(pts) if len(pts) else np.zeros(0), np.full(len(faces), size)])
+    m = len(means)  # opacity 0.5: a surface the fit can thin out or fill in
+    return Gaussians.from_activated(means, np.tile([1.0, 0.0, 0.0, 0.0], (m, 1)), np.repeat(scales[:, None], 3, 1),
+                                    np.full(m, 0.5), np.clip(np.concatenate([cols, face_cols]), 0.0, 1.0))
+
+
 def actor_parts(tracks: list[decompose.Track], views: list[View], cfg: ReconstructConfig, out: Path | None,
                 resume: bool, rng: np.random.Generator,
                 refine: dict[str, pose_refine.PoseRefinement] | None = None) -> list[Part]:
-    """A part per recorded vehicle (:mod:`.decompose`), started on its box's faces in the colours the
-    training views show there (checkpointed under ``out`` unless it is None), with its pose
-    corrections where ``refine`` has them."""
+    """A part per recorded vehicle (:mod:`.decompose`), started by :func:`vehicle_start`
+    (checkpointed under ``out`` unless it is None), with its pose corrections where ``refine`` has
+    them."""
     refine = refine or {}
     parts = []
     budget = replace(cfg.densify, max_gaussians=cfg.actor_max_gaussians, max_angular_size=float("inf"))
-
-    def seen():  # one float image at a time
-        return ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views)
-
     for t in tracks:
-        initial = decompose.box_gaussians(t, cfg.actor_points, rng)
-        initial.sh[:, 0] = rgb_to_sh_dc(decompose.colour_from_views(t, initial.means.astype(np.float64), seen()))
+        initial = vehicle_start(t, views, cfg.actor_points, rng)
         checkpoint = None if out is None else Checkpoint(out / "checkpoint" / "actors" / t.actor_id)
         part, _ = Part.start(t.actor_id, initial, cfg, float(np.linalg.norm(t.half)), torch.zeros(3), budget,
                              checkpoint, resume, poses=t.poses, instance_id=t.instance_id, half=t.half,

@@ -118,3 +118,83 @@ def test_the_command_links_each_recorded_vehicle(tmp_path, capsys):
     m = load_manifest(root)
     assert summary["actors"]["car_1"]["gaussians"] > 100 and "heldout" in summary
     assert m.actor("car_1").splats == "reconstruction/actors/car_1.ply" and m.background_splats
+
+
+def _seen_surface(frames=(0, 1), n=40, seed=0):
+    """A vehicle box at two frames metres and degrees apart, photographed with a depth map: points
+    inside it (each its own colour), road under its wheels and a wall beside it. Returns the track,
+    the views (frame, K, world_to_camera, image, depth) and, per colour, the inside points'
+    local coordinates."""
+    from symdrive_core.rotations import quat_from_yaw
+
+    rng = np.random.default_rng(seed)
+    half = 0.5 * WLH[[1, 0, 2]]
+    poses = [Pose(np.array([1.0 + 2.5 * f, 8.0, half[2]]), quat_from_yaw(0.3 * f)) for f in frames]
+    track = decompose.Track("car_1", 1, WLH, poses)
+    K = conventions.intrinsics_from_fov(320, 240, np.deg2rad(70))
+    views, truth = [], {}
+    for f, pose in zip(frames, poses):
+        inside = rng.uniform(-0.8, 0.8, (n, 3)) * half  # clear of the box's walls by more than a pixel
+        inside[:, 2] = np.maximum(inside[:, 2], -half[2] + 2 * decompose.ROAD_LAYER_M)
+        road = np.column_stack([rng.uniform(-0.8, 0.8, (n, 2)) * half[:2], np.full(n, -half[2] + 0.02)])
+        wall = inside + np.array([0.0, 3.0 * half[1], 0.0])
+        local = np.concatenate([inside, road, wall])
+        w2c = conventions.invert_rigid(look_at_c2w((2.5 * f, 0.0, 1.5), pose.translation))
+        uv, z = conventions.project_points(pose.apply(local), w2c, K)
+        px = np.floor(uv).astype(int)
+        image, depth = np.zeros((240, 320, 3)), np.full((240, 320), np.nan, np.float32)
+        depth[5, 5] = np.inf  # the sky and an unmeasured pixel count as nothing
+        for k, ((u, v), zk) in enumerate(zip(px, z)):
+            if np.isfinite(depth[v, u]):  # one point a pixel
+                continue
+            colour = np.array([(k + 1) / 256.0, f / 4.0, 0.5])
+            image[v, u], depth[v, u] = colour, zk
+            if k < n:
+                truth[(k + 1, f)] = local[k]
+        views.append((f, K, w2c, image, depth))
+    return track, views, truth
+
+
+def test_measured_points_carry_each_return_into_the_vehicle_by_its_own_frame():
+    """Returns inside the box at their own frame come back in the vehicle's frame where its
+    surface is (within a pixel's footprint), each with its pixel's colour, though the box moved
+    3 m and turned 17 degrees between the frames; the road under it, a wall beside it and
+    unmeasured pixels do not."""
+    track, views, truth = _seen_surface()
+    pts, cols = decompose.measured_points(track, views)
+    assert len(pts) == len(truth) > 70
+    for p, c in zip(pts, cols):
+        key = (round(c[0] * 256.0), round(c[1] * 4.0))
+        assert np.linalg.norm(p - truth[key]) < 0.03, (key, p, truth[key])  # a pixel at 9 m is 3 cm
+
+
+def test_measured_points_skip_frames_the_vehicle_is_not_in_and_views_without_depth():
+    track, views, truth = _seen_surface()
+    absent = decompose.Track("car_1", 1, WLH, [track.poses[0], None])
+    assert len(decompose.measured_points(absent, views)[0]) == sum(f == 0 for _, f in truth)
+    no_depth = [(f, K, w2c, image, None) for f, K, w2c, image, _ in views]
+    assert len(decompose.measured_points(track, no_depth)[0]) == 0
+
+
+def test_a_vehicle_starts_on_its_measured_surface_then_its_box():
+    """With fewer returns than start points the vehicle keeps every return (in its colour) and
+    fills up on its box's faces; with more it keeps a random subset of the returns alone."""
+    from symdrive_core.optim.reconstruct import vehicle_start
+    from symdrive_core.optim.views import View
+
+    track, seen, truth = _seen_surface()
+    views = [View(f, torch.from_numpy(K).float(), torch.from_numpy(w2c).float(), torch.from_numpy(image).float(),
+                  torch.from_numpy(depth), 320, 240, "front") for f, K, w2c, image, depth in seen]
+    rng = np.random.default_rng(0)
+    g = vehicle_start(track, views, 200, rng)
+    measured_pts, measured_cols = decompose.measured_points(track, seen)
+    m = len(measured_pts)
+    assert len(g) == 200 and m == len(truth)
+    np.testing.assert_allclose(g.means[:m], measured_pts, atol=1e-5)  # float32 views
+    np.testing.assert_allclose(g.base_colors[:m], measured_cols, atol=1e-5)
+    faces = g.means[m:] / track.half
+    assert np.allclose(np.abs(faces).max(1), 0.95, atol=1e-5)  # on the faces, 5 % inside
+    np.testing.assert_allclose(g.opacities, 0.5, atol=1e-6)
+    few = vehicle_start(track, views, 30, rng)
+    assert len(few) == 30
+    assert all(np.linalg.norm(measured_pts - p, axis=1).min() < 1e-5 for p in few.means)
