@@ -429,16 +429,19 @@ def vehicle_start(track: decompose.Track, views: list[View], n: int, rng: np.ran
     """``n`` start Gaussians of a recorded vehicle in its own frame: the surface its training views'
     depth measured in its box (at most ``n`` of those points, sized as the background's start is),
     the rest on the box's faces in the colours the views show there."""
-    pts, cols = decompose.measured_points(track, ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(),
-                                                   v.image.numpy(), v.depth.numpy()) for v in views if v.depth is not None))
+    present = [v for v in views if v.frame < len(track.poses) and track.poses[v.frame] is not None]
+
+    def arrays(v: View) -> tuple:  # one float image at a time
+        return v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()
+
+    pts, cols = decompose.measured_points(track, (arrays(v) + (v.depth.numpy(),) for v in present if v.depth is not None))
     if len(pts) > n:
         keep = np.sort(rng.choice(len(pts), n, replace=False))
         pts, cols = pts[keep], cols[keep]
     if len(pts) < 4:  # too few to size by their neighbours
         pts, cols = np.zeros((0, 3)), np.zeros((0, 3))
     faces, size = decompose.box_surface(track, n - len(pts), rng)
-    seen = ((v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()) for v in views)
-    face_cols = decompose.colour_from_views(track, faces, seen) if len(faces) else np.zeros((0, 3))
+    face_cols = decompose.colour_from_views(track, faces, map(arrays, present)) if len(faces) else np.zeros((0, 3))
     means = np.concatenate([pts, faces])
     scales = np.concatenate([knn_scale(pts) if len(pts) else np.zeros(0), np.full(len(faces), size)])
     m = len(means)  # opacity 0.5: a surface the fit can thin out or fill in
