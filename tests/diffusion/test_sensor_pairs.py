@@ -10,6 +10,8 @@ import torch
 from safetensors.numpy import load_file
 
 from symdrive_core.diffusion.adapt import AdaptConfig, adapt_restorer, drive_identity
+from symdrive_core.diffusion.config import CycleConfig
+from symdrive_core.diffusion.cycle import cycle_config
 from symdrive_core.diffusion.data import PairSet, make_pairs
 from symdrive_core.errors import InputError
 from symdrive_core.io.images import read_image, write_image
@@ -20,6 +22,7 @@ from symdrive_core.splat.render import SplatRenderer
 from tests.optim.conftest import synthetic_package  # noqa: F401  (fixture)
 
 TINY = AdaptConfig(iters=3, offsets=(0.5,), cycle_offsets=(1.0,), cycle_iters=10)
+QUICK_CYCLE = cycle_config(CycleConfig(iters=10))  # the cycle's fit is not what these tests look at
 
 
 @pytest.fixture
@@ -41,7 +44,7 @@ def test_sensor_pairs_are_the_recorded_camera_at_training_frames(rig, tmp_path):
     manifest, g = rig
     assert manifest.ground_truth["heldout_frames"] == [1, 4]  # truth at 0, 2, 4: frame 4 is held out
     out = make_pairs(manifest, g, [0.5, 1.0], tmp_path / "p.safetensors", cycle_offsets=[1.0], sensor=True,
-                     progress=False)
+                     cycle_config=QUICK_CYCLE, progress=False)
     data = load_file(str(out))
     assert data["sensor_frame"].tolist() == [0, 0, 2, 2] and data["sensor_offset"].tolist() == [0.5, 1.0] * 2
     assert data["sensor_view"].tolist() == [0, 0, 1, 1] and len(data["sensor_start"]) == 2
@@ -54,7 +57,7 @@ def test_sensor_pairs_are_the_recorded_camera_at_training_frames(rig, tmp_path):
     assert np.abs(data["sensor_left"][3] / 255.0 - render(at.shifted(-1.0))).max() <= tol
     assert np.abs(data["sensor_right"][3] / 255.0 - render(at.shifted(1.0))).max() <= tol
     plain = load_file(str(make_pairs(manifest, g, [0.5], tmp_path / "q.safetensors", cycle_offsets=[1.0],
-                                     progress=False)))
+                                     cycle_config=QUICK_CYCLE, progress=False)))
     assert not any(k.startswith("sensor_") for k in plain)
     with pytest.raises(ValueError, match="cycle offsets"):
         make_pairs(manifest, g, [0.5], tmp_path / "x.safetensors", sensor=True, progress=False)
@@ -63,14 +66,14 @@ def test_sensor_pairs_are_the_recorded_camera_at_training_frames(rig, tmp_path):
 def test_rendered_truth_is_no_sensor(synthetic_package, tmp_path):  # noqa: F811
     root, g = synthetic_package
     out = make_pairs(load_manifest(root), g, [0.5], tmp_path / "p.safetensors", cycle_offsets=[1.0], sensor=True,
-                     progress=False)
+                     cycle_config=QUICK_CYCLE, progress=False)
     assert not any(k.startswith("sensor_") for k in load_file(str(out)))
 
 
 def test_pair_set_reads_sensor_pairs_with_their_own_start_and_warp(rig, tmp_path):
     manifest, g = rig
     path = make_pairs(manifest, g, [0.5], tmp_path / "p.safetensors", cycle_offsets=[1.0], warps=True,
-                      sensor=True, progress=False)
+                      sensor=True, cycle_config=QUICK_CYCLE, progress=False)
     data = load_file(str(path))
     pairs = PairSet(path)
     synthetic = len(data["left"])
@@ -96,7 +99,8 @@ def test_a_sensor_image_of_the_wrong_size_is_named(rig, tmp_path):
     manifest, g = rig
     write_image(manifest.resolve("lat/+0.5/002.png"), np.zeros((8, 8, 3), np.float32))
     with pytest.raises(InputError, match=r"002.png: ground_truth.lateral \(frame 2\): image is 8x8"):
-        make_pairs(manifest, g, [0.5], tmp_path / "p.safetensors", cycle_offsets=[1.0], sensor=True, progress=False)
+        make_pairs(manifest, g, [0.5], tmp_path / "p.safetensors", cycle_offsets=[1.0], sensor=True,
+                   cycle_config=QUICK_CYCLE, progress=False)
     assert not (tmp_path / "p.safetensors").exists()
 
 

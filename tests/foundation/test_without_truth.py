@@ -141,7 +141,7 @@ def test_insert_renders_and_insert_eval_is_one_line(bare_package, tmp_path, caps
 def test_run_restores_and_scores_what_it_can(bare_package, tmp_path):
     pkg = bare_package()
     out = tmp_path / "out"
-    assert main(["run", str(pkg), "--out", str(out), "--no-refine", "--quiet"]) == 0
+    assert main(["run", str(pkg), "--out", str(out), "--no-refine", "--no-adapt", "--quiet"]) == 0
     report = json.loads((out / "report.json").read_text())
     ran = {s["name"] for s in report["stages"] if s["ran"]}
     assert {"render", "restore", "evaluate"} <= ran

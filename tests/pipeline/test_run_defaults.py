@@ -1,6 +1,7 @@
 """``symdrive run PACKAGE`` with no options on a package with lateral offsets and recorded images:
 every stage end to end (refinement on), a window of frames and offsets, and a re-run after a
-failed stage that reuses what was finished."""
+failed stage that reuses what was finished (the restorer's adaptation, the run's slowest stage, only
+where every stage runs: its reuse is tests/pipeline/test_adapt.py's)."""
 
 import json
 
@@ -46,7 +47,7 @@ def test_default_run_runs_every_stage(recorded_package, tmp_path, capsys):
 
 def test_window_of_frames_and_offsets_on_both_sides(recorded_package, tmp_path):
     out = tmp_path / "out"
-    assert main(["run", str(recorded_package), "--out", str(out), "--quiet", "--no-refine",
+    assert main(["run", str(recorded_package), "--out", str(out), "--quiet", "--no-refine", "--no-adapt",
                  "--frames", "1", "--offsets", "0.5"]) == 0
     assert sorted(p.relative_to(out).as_posix() for p in (out / "restore").rglob("*.png")) == [
         "restore/front/+0.5/000001.png", "restore/front/-0.5/000001.png"]
@@ -71,7 +72,7 @@ def test_rerun_after_a_failed_stage_reuses_finished_work(recorded_package, tmp_p
 
     monkeypatch.setitem(stages.STAGE_RUNNERS, "harmonize", broken)
     with pytest.raises(RuntimeError):
-        main(["run", str(recorded_package), "--out", str(out), "--quiet"])
+        main(["run", str(recorded_package), "--out", str(out), "--quiet", "--no-adapt"])
     monkeypatch.undo()
     restored = {p: p.stat().st_mtime_ns for p in (out / "restore").rglob("*.png")}
     assert len(restored) == 6 and (out / "refine" / "background.ply").exists()
@@ -80,7 +81,7 @@ def test_rerun_after_a_failed_stage_reuses_finished_work(recorded_package, tmp_p
         raise AssertionError("the refined reconstruction on disk should have been reused")
 
     monkeypatch.setattr("symdrive_core.diffusion.refine.refine_gaussians", refit)
-    assert main(["run", str(recorded_package), "--out", str(out), "--quiet"]) == 0
+    assert main(["run", str(recorded_package), "--out", str(out), "--quiet", "--no-adapt"]) == 0
     assert {p: p.stat().st_mtime_ns for p in (out / "restore").rglob("*.png")} == restored
     report = _stages(out)
     assert report["refine"]["ran"] and report["refine"]["reused"] and report["harmonize"]["ran"]
