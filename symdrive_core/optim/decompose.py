@@ -43,6 +43,10 @@ class Track:
     def frames(self) -> list[int]:
         return [f for f, p in enumerate(self.poses) if p is not None]
 
+    def pose_at(self, frame: int) -> Pose | None:
+        """The box at ``frame``; None where the drive did not see the vehicle (or past its poses)."""
+        return self.poses[frame] if frame < len(self.poses) else None
+
 
 def tracks(manifest: Manifest) -> list[Track]:
     """The package's recorded vehicles that can be decomposed: ``existing`` actors with a box and a
@@ -101,7 +105,7 @@ def measured_points(track: Track, views) -> tuple[np.ndarray, np.ndarray]:
     pts, cols = [], []
     reach = np.linalg.norm(track.half)
     for frame, K, w2c, image, depth in views:
-        p = track.poses[frame] if frame < len(track.poses) else None
+        p = track.pose_at(frame)
         if p is None or depth is None:
             continue
         v, u = np.nonzero(measured(depth))
@@ -126,7 +130,7 @@ def colour_from_views(track: Track, local: np.ndarray, views) -> np.ndarray:
     must change colour much turn transparent instead."""
     samples = [[] for _ in range(len(local))]
     for frame, K, w2c, image in views:
-        p = track.poses[frame]
+        p = track.pose_at(frame)
         if p is None:
             continue
         cam = p.apply(local) @ w2c[:3, :3].T + w2c[:3, 3]

@@ -429,7 +429,7 @@ def vehicle_start(track: decompose.Track, views: list[View], n: int, rng: np.ran
     """``n`` start Gaussians of a recorded vehicle in its own frame: the surface its training views'
     depth measured in its box (at most ``n`` of those points, sized as the background's start is),
     the rest on the box's faces in the colours the views show there."""
-    present = [v for v in views if v.frame < len(track.poses) and track.poses[v.frame] is not None]
+    present = [v for v in views if track.pose_at(v.frame) is not None]
 
     def arrays(v: View) -> tuple:  # one float image at a time
         return v.frame, v.K.double().numpy(), v.viewmat.double().numpy(), v.image.numpy()
