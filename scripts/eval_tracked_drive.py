@@ -10,7 +10,11 @@ labels' own 2D boxes give the vehicles that drive, and elsewhere.
         --fit static=fits/static --fit boxes=fits/boxes --fit refined=fits/refined --out tracked.json
 
 A real drive has no vehicle masks; KITTI's tracking labels draw each object's 2D box in the
-image by hand, apart from its 3D box, so they mark the vehicles' pixels without the fits' help.
+image by hand, apart from its 3D box, so they mark the vehicles' pixels without the fits' help
+(``label_boxes``, in the package's first camera, the one the labels were drawn in). Every camera
+is also scored where the labels' 3D boxes project (``boxes``: each box's bounding rectangle in the
+image, at the recorded pose the package holds, never a fit's), so a rig's other cameras add their
+held-out frames; ``boxes_pooled`` averages the held-out frames of all cameras.
 A vehicle drives when its box's centre moves more than ``--moving-m`` in the package's world
 over its frames (the parked cars' boxes drift with the labels' and the ego poses' jitter). Each
 fit is rendered with the vehicles where it placed them (its refined poses, where it has them)
@@ -62,6 +66,46 @@ def label_masks(labels: Path, ids: list[str], shape: tuple[int, int], label_size
     return masks
 
 
+def projected_box_masks(manifest, ids: list[str], camera: str) -> dict:
+    """Frame -> boolean image of ``camera``: the bounding rectangles of the tracks ``ids``' 3D boxes
+    at their recorded poses, where a box lies wholly in front of the camera and reaches the image."""
+    import numpy as np
+
+    from symdrive_core import conventions
+    from symdrive_core.scene.visibility import box_corners_world, vehicle_local_box
+
+    cam = manifest.camera(camera)
+    masks: dict[int, np.ndarray] = {}
+    for a in manifest.actors:
+        if a.id not in ids:
+            continue
+        lo, hi = vehicle_local_box(a.wlh)
+        for f, frame in enumerate(cam.frames):
+            if (pose := a.recorded_pose(f)) is None:
+                continue
+            uv, z = conventions.project_points(box_corners_world(lo, hi, pose.R, pose.translation),
+                                               frame.world_to_camera, frame.K)
+            if np.any(z <= conventions.NEAR_PLANE):
+                continue
+            # pixel i covers [i - 0.5, i + 0.5]: the rectangle's pixels are those whose centres it holds
+            (x0, y0), (x1, y1) = np.ceil(uv.min(0)).astype(int), np.floor(uv.max(0)).astype(int)
+            x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, cam.width - 1), min(y1, cam.height - 1)
+            if x0 <= x1 and y0 <= y1:
+                masks.setdefault(f, np.zeros((cam.height, cam.width), bool))[y0:y1 + 1, x0:x1 + 1] = True
+    return masks
+
+
+def pooled(rows: list[dict]) -> dict:
+    """Scores of several cameras as one: each mean weighted by its camera's frame count (a camera
+    without a score for a key left out of that key)."""
+    out = {"frames": sum(r["frames"] for r in rows)}
+    for key in ("psnr_image", "psnr_vehicles", "psnr_elsewhere"):
+        scored = [(r[key], r["frames"]) for r in rows if r.get(key) is not None and r["frames"]]
+        n = sum(w for _, w in scored)
+        out[key] = round(sum(v * w for v, w in scored) / n, 3) if n else None
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("package", type=Path, help="the drive's package, its tracks imported")
@@ -85,12 +129,16 @@ def main(argv=None) -> int:
     cam = manifest.cameras[0]
     ids = moving_tracks(manifest, args.moving_m)
     masks = label_masks(args.labels, ids, (cam.height, cam.width), tuple(args.label_size), args.frame_offset)
+    boxes = {c.name: projected_box_masks(manifest, ids, c.name) for c in manifest.cameras}
     results = {"moving": ids}
     for spec in args.fit:
         name, _, folder = spec.partition("=")
         background, actors, shadows = read_reconstruction(Path(folder))
         m = with_refined(load_manifest(args.package), read_refined(Path(folder)))  # changes it in place
-        results[name] = evaluate_decomposition(m, background, actors, shadows=shadows, masks=masks)
+        by_camera = {c: evaluate_decomposition(m, background, actors, shadows=shadows, masks=boxes[c], camera=c)
+                     for c in boxes}
+        results[name] = {"label_boxes": evaluate_decomposition(m, background, actors, shadows=shadows, masks=masks),
+                         "boxes": by_camera, "boxes_pooled": pooled(list(by_camera.values()))}
         print(name, json.dumps(results[name]), flush=True)
     write_text_atomic(args.out, json.dumps(results, indent=1) + "\n")
     return 0

@@ -37,18 +37,20 @@ def _mean(values) -> float | None:
 
 def evaluate_decomposition(manifest: Manifest, background: Gaussians, actors: dict[str, Gaussians],
                            frames: list[int] | None = None, shadows: dict | None = None,
-                           masks: dict[int, np.ndarray] | None = None) -> dict:
-    """Held-out frames: PSNR over the image, over the moving vehicles' pixels and elsewhere (the
-    truth's vehicle masks, or ``masks``: boolean images by frame, where a real drive's labels
-    put its moving vehicles), the recorded vehicles at their recorded poses with their ``shadows``
-    (shadow layers, by actor id)."""
+                           masks: dict[int, np.ndarray] | None = None, camera: str | None = None) -> dict:
+    """Held-out frames of ``camera`` (the package's first by default): PSNR over the image, over the
+    moving vehicles' pixels and elsewhere (the truth's vehicle masks, or ``masks``: boolean images
+    by frame, where a real drive's labels put its moving vehicles), the recorded vehicles at their
+    recorded poses with their ``shadows`` (shadow layers, by actor id)."""
     frames = split_frames(manifest)[1] if frames is None else frames
+    cam = manifest.camera(camera) if camera else manifest.cameras[0]
     if masks is None:
+        if cam is not manifest.cameras[0]:
+            raise ValueError(f"the truth's vehicle masks are camera {manifest.cameras[0].name}'s: pass {cam.name}'s")
         require_truth(manifest, "vehicles", "scoring moving vehicles needs their masks")
         paths = vehicle_masks(manifest)
         masks = {f: read_mask(manifest.resolve(paths[f])) > 0.5 for f in frames if f in paths}
     frames = [f for f in frames if f in masks]
-    cam = manifest.cameras[0]
     renderer = TrafficRenderer(background, actors, shadows)
     rows = {"image": [], "vehicles": [], "elsewhere": []}
     for f in frames:

@@ -125,6 +125,33 @@ def test_a_real_drives_label_boxes_score_its_moving_vehicles(traffic_truth, tmp_
                         "--label-size", *map(str, size), "--out", str(out)]) == 0
     result = json.loads(out.read_text())
     assert result["moving"] == ["track_1"]
-    assert result["decomposed"] == evaluate_decomposition(m, decomposed.gaussians, decomposed.actors, masks=rects)
-    assert result["decomposed"]["psnr_vehicles"] != evaluate_decomposition(m, decomposed.gaussians,
-                                                                          decomposed.actors)["psnr_vehicles"]
+    scored = result["decomposed"]
+    assert scored["label_boxes"] == evaluate_decomposition(m, decomposed.gaussians, decomposed.actors, masks=rects)
+    assert scored["label_boxes"]["psnr_vehicles"] != evaluate_decomposition(m, decomposed.gaussians,
+                                                                           decomposed.actors)["psnr_vehicles"]
+    boxes = script.projected_box_masks(load_manifest(root), ["track_1"], m.cameras[0].name)
+    assert scored["boxes"] == {m.cameras[0].name: evaluate_decomposition(m, decomposed.gaussians, decomposed.actors,
+                                                                         masks=boxes)}
+    assert scored["boxes_pooled"] == scored["boxes"][m.cameras[0].name]  # one camera: pooled is its score
+
+
+def test_projected_boxes_hold_the_vehicles_surface(traffic_truth):
+    """The 3D box at its recorded pose, projected: its bounding rectangle holds exactly the pixels
+    whose centres lie within the extremes of the true box's surface points (its Gaussians' centres,
+    the corners among them) placed by the true pose and projected: the actor's pose, the box's axes
+    and the pixel centres agree."""
+    from symdrive_core import conventions
+    from tests.optim.moving_box import true_box
+    from tests.scripts import load_script
+
+    m, _ = traffic_truth
+    cam = m.cameras[0]
+    boxes = load_script("eval_tracked_drive").projected_box_masks(m, ["car_1"], cam.name)
+    surface = true_box().means
+    assert len(boxes) >= 10
+    for f, mask in boxes.items():
+        uv, z = conventions.project_points(box_pose(f).apply(surface), cam.frames[f].world_to_camera, cam.frames[f].K)
+        (x0, y0), (x1, y1) = np.ceil(uv.min(0)).astype(int), np.floor(uv.max(0)).astype(int)
+        rect = np.zeros_like(mask)
+        rect[max(y0, 0):y1 + 1, max(x0, 0):x1 + 1] = True
+        assert (z > 0).all() and np.array_equal(rect, mask), f
