@@ -54,6 +54,22 @@ def test_decomposed_beats_static_on_the_vehicles_pixels(traffic_truth, tmp_path)
     assert d["psnr_vehicles"] > s["psnr_vehicles"] + 3.0 and d["psnr_elsewhere"] > s["psnr_elsewhere"] - 0.5
 
 
+def test_another_camera_is_scored_only_with_its_own_masks(traffic_truth):
+    """The truth's vehicle masks are the first camera's: a second camera named without masks of its
+    own is refused, not scored against them; named with them it is scored as the first camera is."""
+    from dataclasses import replace
+
+    m, decomposed = traffic_truth
+    first = m.cameras[0]
+    rig = replace(m, cameras=[first, replace(first, name="side")])
+    with pytest.raises(ValueError, match="side"):
+        evaluate_decomposition(rig, decomposed.gaussians, decomposed.actors, camera="side")
+    whole = {f: np.ones((first.height, first.width), bool) for f in range(len(m.frames))}
+    side = evaluate_decomposition(rig, decomposed.gaussians, decomposed.actors, masks=whole, camera="side")
+    assert side["frames"] == 4 and side == evaluate_decomposition(m, decomposed.gaussians, decomposed.actors,
+                                                                  masks=whole)
+
+
 def test_edits_are_scored_with_and_without_inpainting(traffic_truth):
     m, decomposed = traffic_truth
     calls = []
