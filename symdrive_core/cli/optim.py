@@ -77,6 +77,9 @@ def add_commands(sub) -> None:
                    help="learn a correction of each recorded vehicle's per-frame pose with its Gaussians, written back "
                         "as its recorded poses (the tracks' boxes kept as tracked_poses); default: the vehicles whose "
                         "boxes came from `symdrive import tracks`")
+    p.add_argument("--vehicle-alpha-weight", type=float, metavar="W",
+                   help="cost of each pixel a recorded vehicle covers, so its Gaussians draw only what the background "
+                        f"behind it does not (default {default_of(ReconstructConfig, 'vehicle_alpha_weight')}; 0: off)")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats (and the recorded vehicles' assets.splats) at "
@@ -95,7 +98,7 @@ def _reconstruct(args) -> int:
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
-                                    "max_init_points", "seed", "exposure",
+                                    "max_init_points", "seed", "exposure", "vehicle_alpha_weight",
                                     densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))

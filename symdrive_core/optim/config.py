@@ -116,6 +116,10 @@ class ReconstructConfig:
     decompose: bool = True
     actor_points: int = 3000  # initial Gaussians per recorded vehicle: its measured surface, then its box's faces
     actor_max_gaussians: int = 40_000
+    # Each pixel a recorded vehicle covers costs this much (its accumulated alpha, against the
+    # photometric loss of that pixel): a vehicle keeps only what draws better than the background
+    # behind it, so the slack of a loose box does not take up the street seen past the car. 0: off.
+    vehicle_alpha_weight: float = 0.0
     pose_refine: PoseRefineConfig = field(default_factory=PoseRefineConfig)
     # Where the scene has a sun, each recorded vehicle's shadow is a layer fitted with the
     # Gaussians (:mod:`.recorded_shadows`), at this learning rate on its occlusion logits.
