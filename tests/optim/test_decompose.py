@@ -205,8 +205,8 @@ def test_a_loose_box_leaves_to_the_background_what_it_draws(tmp_path, monkeypatc
     """A tracked box half as long and wide again as its car, on a plain street: the slack's
     Gaussians start in the street's colour and draw it as well as the background behind them, so
     only the coverage cost tells them apart. With it the vehicle leaves the street to the
-    background (less of the vehicle where the car is not) and still draws the car, a little softer at its
-    edges."""
+    background (less of the vehicle where the car is not) and still draws the car, at a
+    small cost on its pixels."""
     from dataclasses import replace
 
     from tests.optim import moving_box
