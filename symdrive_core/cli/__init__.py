@@ -101,6 +101,11 @@ def angle_deg(value: str) -> float:
     return _float_between(value, 0.0, 90.0, "a number of degrees", "from 0 to 90 degrees")
 
 
+def loss_weight(value: str) -> float:
+    """A loss term's weight: finite and at least 0 (0: the term is off)."""
+    return _float_between(value, 0.0, sys.float_info.max, "a number", "a finite number, 0 or more")
+
+
 def _float_between(value: str, low: float, high: float, expected: str, bounds: str) -> float:
     try:
         x = float(value)

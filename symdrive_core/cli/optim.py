@@ -8,7 +8,16 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..optim.config import COARSE_TO_FINE, ReconstructConfig
-from . import add_quiet_option, angle_deg, count_int, default_of, given, positive_int, unit_fraction
+from . import (
+    add_quiet_option,
+    angle_deg,
+    count_int,
+    default_of,
+    given,
+    loss_weight,
+    positive_int,
+    unit_fraction,
+)
 
 
 def resolution_schedule_arg(text: str) -> tuple[float, ...] | None:
@@ -45,7 +54,7 @@ def add_commands(sub) -> None:
                         "'full': full resolution throughout; 'auto' (the default): "
                         f"{','.join(map(str, COARSE_TO_FINE))} for images of at least "
                         f"{default_of(ReconstructConfig, 'coarse_to_fine_pixels')} pixels, full below")
-    p.add_argument("--depth-weight", type=float, help="inverse-depth L1 weight at the depth maps' measured pixels, "
+    p.add_argument("--depth-weight", type=loss_weight, help="inverse-depth L1 weight at the depth maps' measured pixels, "
                    f"0 = off (default {default_of(ReconstructConfig, 'sensor_depth_weight')} where the depth is LiDAR's, "
                    "sparse, as `import lidar` writes it; else 0)")
     p.add_argument("--exposure", choices=("off", "camera", "frame"),
@@ -77,7 +86,7 @@ def add_commands(sub) -> None:
                    help="learn a correction of each recorded vehicle's per-frame pose with its Gaussians, written back "
                         "as its recorded poses (the tracks' boxes kept as tracked_poses); default: the vehicles whose "
                         "boxes came from `symdrive import tracks`")
-    p.add_argument("--vehicle-alpha-weight", type=float, metavar="W",
+    p.add_argument("--vehicle-alpha-weight", type=loss_weight, metavar="W",
                    help="cost of each pixel a recorded vehicle covers, so its Gaussians draw only what the background "
                         f"behind it does not (default {default_of(ReconstructConfig, 'vehicle_alpha_weight')}; 0: off)")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
