@@ -342,8 +342,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
             dl = depth_loss(info, alpha, view.depth)
             if dl is not None:
                 loss = loss + depth_weight * dl
-        coverage = info.get("instance")
-        if cfg.vehicle_alpha_weight > 0 and coverage is not None and coverage.shape[-1]:
+        if cfg.vehicle_alpha_weight > 0 and (coverage := info.get("instance")) is not None and coverage.shape[-1]:
             loss = loss + cfg.vehicle_alpha_weight * coverage.sum(-1).mean()
         for r in refining:
             loss = loss + r.penalty(n_views)

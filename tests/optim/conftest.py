@@ -82,3 +82,29 @@ def write_package(root, n_frames=6, offsets=(-0.5, 0.5)):
 @pytest.fixture(scope="module")
 def synthetic_package(tmp_path_factory):
     return write_package(tmp_path_factory.mktemp("synthetic") / "pkg")
+
+
+@pytest.fixture
+def command_config(monkeypatch):
+    """``command_config(ARGS)``: the :class:`ReconstructConfig` that ``symdrive reconstruct ARGS``
+    composes, caught where it would start fitting (how each option reaches the fit, without one)."""
+    from symdrive_core.cli import main
+    from symdrive_core.optim import reconstruct
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def stop(manifest, out, cfg, **kwargs):
+        seen.append(cfg)
+        raise Stop
+
+    monkeypatch.setattr(reconstruct, "reconstruct", stop)
+
+    def config(args: list[str]):
+        with pytest.raises(Stop):
+            main(["reconstruct", *args])
+        return seen[-1]
+
+    return config

@@ -237,27 +237,15 @@ def test_a_loose_box_leaves_to_the_background_what_it_draws(tmp_path, monkeypatc
     assert car[0.03] > car[0.0] - 1.5, (outside, car)  # 33.3 and 32.0 dB
 
 
-def test_the_coverage_cost_reaches_the_fit_from_the_command_line(tmp_path, monkeypatch):
+def test_the_coverage_cost_reaches_the_fit_from_the_command_line(tmp_path, command_config):
     """``--vehicle-alpha-weight`` sets the config's weight (off when not given); a negative or
     non-finite weight is refused before any fitting."""
     from symdrive_core.cli import main
-    from symdrive_core.optim import reconstruct as module
     from tests.optim.moving_box import write_moving_box
 
-    class Stop(Exception):
-        pass
-
-    seen = []
-
-    def stop(manifest, out, cfg, **kwargs):
-        seen.append(cfg.vehicle_alpha_weight)
-        raise Stop
-
-    monkeypatch.setattr(module, "reconstruct", stop)
     root, *_ = write_moving_box(tmp_path / "pkg")
-    for extra in ([], ["--vehicle-alpha-weight", "0.02"]):
-        with pytest.raises(Stop):
-            main(["reconstruct", str(root), "--quiet", *extra])
+    seen = [command_config([str(root), "--quiet", *extra]).vehicle_alpha_weight
+            for extra in ([], ["--vehicle-alpha-weight", "0.02"])]
     assert seen == [ReconstructConfig().vehicle_alpha_weight, 0.02] and seen[0] == 0.0
     for bad in ("-0.1", "nan", "inf"):
         with pytest.raises(SystemExit) as exit_:

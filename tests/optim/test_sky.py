@@ -97,27 +97,17 @@ def test_the_dome_starts_on_the_estimated_sky_only():
     assert len(sky_points([view], 500, 100.0, rng, None)[0]) == 0  # no cloud, no depth: no sky claimed
 
 
-def test_the_command_line_turns_the_skyline_and_the_sensor_dome_off_and_leaves_them_on_by_default(synthetic_package, monkeypatch):
+def test_the_command_line_turns_the_skyline_and_the_sensor_dome_off_and_leaves_them_on_by_default(synthetic_package,
+                                                                                                  command_config):
     import pytest
 
     from symdrive_core.cli import main
-    from symdrive_core.optim import reconstruct
 
-    seen = []
-
-    class Stop(Exception):
-        pass
-
-    def stop(manifest, out, cfg, **kwargs):
-        seen.append((cfg.sky.skyline, cfg.sky.sensor_dome_deg))
-        raise Stop
-
-    monkeypatch.setattr(reconstruct, "reconstruct", stop)
-    for extra in ([], ["--no-sky-skyline"], ["--sensor-dome-deg", "0"]):
-        with pytest.raises(Stop):
-            main(["reconstruct", str(synthetic_package[0]), "--quiet", *extra])
+    seen = [command_config([str(synthetic_package[0]), "--quiet", *extra]).sky
+            for extra in ([], ["--no-sky-skyline"], ["--sensor-dome-deg", "0"])]
     default = SkyConfig()
-    assert seen == [(default.skyline, default.sensor_dome_deg), (False, default.sensor_dome_deg), (default.skyline, 0.0)]
+    assert [(s.skyline, s.sensor_dome_deg) for s in seen] == [
+        (default.skyline, default.sensor_dome_deg), (False, default.sensor_dome_deg), (default.skyline, 0.0)]
     assert default.skyline and default.sensor_dome_deg > 0
     with pytest.raises(SystemExit):  # an angle below 0 is no size
         main(["reconstruct", str(synthetic_package[0]), "--sensor-dome-deg", "-1"])
