@@ -89,3 +89,15 @@ def quats_z_to(normals: np.ndarray) -> np.ndarray:
     opposite = q[:, 0] < 1e-8  # normal = -Z: half-turn about X
     q[opposite] = [0.0, 1.0, 0.0, 0.0]
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def rotation_vector_matrix(v) -> np.ndarray:
+    """[3, 3] rotation by ``|v|`` radians about ``v`` (Rodrigues); the identity for ``v = 0``."""
+    v = np.asarray(v, dtype=np.float64)
+    angle = float(np.linalg.norm(v))
+    if angle == 0.0:
+        return np.eye(3)
+    x, y, z = v / angle
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+

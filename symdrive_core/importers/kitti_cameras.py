@@ -68,9 +68,9 @@ def _clock(text: str, path: Path, where: str) -> tuple[int, float]:
     return int((t - datetime(1970, 1, 1)).total_seconds()), float(f"0.{frac or 0}")
 
 
-def _frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
-    """(seconds since the first of ``names``, that frame's time as written) from a camera's
-    ``timestamps.txt`` (line n: frame n), or None when the camera has none."""
+def frame_clocks(path: Path, names: list[str]) -> tuple[list[tuple[int, float]], list[str]] | None:
+    """(each of ``names``' time as :func:`_clock` splits it, the file's lines) from a sensor's
+    ``timestamps.txt`` (line n: frame n), or None when the sensor has none."""
     if not path.is_file():
         return None
     lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
@@ -80,6 +80,25 @@ def _frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None
         if n >= len(lines) or not lines[n].strip():
             raise InputError(path, f"no time for frame {name}; the file has {len(lines)} lines", f"line {n + 1}")
         clocks.append(_clock(lines[n], path, f"line {n + 1}"))
+    return clocks, lines
+
+
+def clock_lag(later: Path, earlier: Path, names: list[str]) -> np.ndarray | None:
+    """[N] seconds from each frame's time in ``earlier``'s ``timestamps.txt`` to its time in
+    ``later``'s, or None when either sensor has none."""
+    a, b = frame_clocks(later, names), frame_clocks(earlier, names)
+    if a is None or b is None:
+        return None
+    return np.array([float(sa - sb) + (fa - fb) for (sa, fa), (sb, fb) in zip(a[0], b[0])])
+
+
+def _frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None:
+    """(seconds since the first of ``names``, that frame's time as written) from a camera's
+    ``timestamps.txt`` (line n: frame n), or None when the camera has none."""
+    read = frame_clocks(path, names)
+    if read is None:
+        return None
+    clocks, lines = read
     s0, f0 = clocks[0]
     times = [float(s - s0) + (f - f0) for s, f in clocks]
     for name, a, b in zip(names[1:], times, times[1:]):

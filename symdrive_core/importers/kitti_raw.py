@@ -12,7 +12,8 @@ them (:mod:`.kitti_calib`): rectified camera ``i`` from the Velodyne is ``T_i R_
 T_velo_to_cam`` and from the IMU that times ``T_imu_to_velo``, where ``T_i`` moves rectified camera
 0's frame to camera ``i``'s (camera ``i`` sits at ``-K_i^-1 P_rect_0i[:, 3]`` in it: the colour
 cameras 6 cm left and 0.47 m right of camera 0). A camera's pose at a frame is the IMU's pose from
-OXTS (:mod:`.oxts`) times the inverse of that chain. KITTI puts pixel centres at integer
+OXTS (:mod:`.oxts`), carried from the fix's time to the first camera's image time when both
+``timestamps.txt`` are there, times the inverse of that chain. KITTI puts pixel centres at integer
 coordinates; the package's K puts them at +0.5.
 
 The LiDAR enters two ways, from the same scans: each package camera's sparse depth (the scans
@@ -35,9 +36,9 @@ from .. import conventions
 from ..errors import InputError
 from .frames import DEFAULT_FPS, group_views
 from .kitti_calib import RAW_CAM_TO_CAM, layout_of, raw_rigid, read_labels, rectified_camera, velo_to_camera
-from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, rig_views
+from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, clock_lag, rig_views
 from .lidar import LidarConfig, list_scans, seen_returns
-from .oxts import imu_poses, read_record
+from .oxts import carried, imu_poses, read_record
 from .package import Source
 from .tracklets import Tracklet, read_tracklets
 from .tracks import TracksConfig
@@ -142,7 +143,11 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
     images = camera_frames(drive, cameras, "data")
     names = sorted(images[cameras[0]], key=int)
     oxts = [drive / "oxts" / "data" / f"{name}.txt" for name in names]
-    world_from_imu, projection = imu_poses(np.stack([read_record(p) for p in oxts]))
+    records = np.stack([read_record(p) for p in oxts])
+    world_from_imu, projection = imu_poses(records)
+    lag = clock_lag(drive / camera_name(cameras[0]) / "timestamps.txt", drive / "oxts" / "timestamps.txt", names)
+    if lag is not None:  # the rig's cameras are triggered together: the first one's times are the rig's
+        world_from_imu = carried(world_from_imu, records, lag)
     views, time_origin = rig_views(drive, "data", rig, names, images, world_from_imu,
                                    {i: conventions.invert_rigid(rig[i].imu_to_camera) for i in cameras},
                                    [(p, 1) for p in oxts])
@@ -168,6 +173,7 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
 
         g = read_splats(splats)
     notes = {"drive": drive.name, "oxts": projection, "time_origin": time_origin,
+             "oxts_to_image_s": None if lag is None else {"min": float(lag.min()), "max": float(lag.max())},
              "kitti_cameras": {camera_name(i): {"imu_to_camera": rig[i].imu_to_camera.tolist()} for i in cameras}}
     src = Source("kitti-raw", drive, grouped, splats=g, splats_path=None if splats is None else Path(splats),
                  points=points, colors=colors, point_frames=point_frames, notes=notes)

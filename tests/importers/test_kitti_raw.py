@@ -17,6 +17,7 @@ from symdrive_core.importers.kitti_raw import KittiRawConfig, read_kitti_raw
 from symdrive_core.importers.oxts import EARTH_RADIUS_M, euler_rotation
 from symdrive_core.io.images import read_image, write_image
 from symdrive_core.io.points import read_points
+from symdrive_core.rotations import rotation_vector_matrix
 from symdrive_core.scene import load_manifest
 
 from . import drives
@@ -80,15 +81,17 @@ def mercator(lat, lon, alt, scale):
                      scale * EARTH_RADIUS_M * np.log(np.tan((90.0 + lat) * np.pi / 360.0)), alt])
 
 
-def oxts_line(k: int) -> str:
-    """The devkit's formulas inverted: the fix and angles that give ``world_from_imu(k)``."""
+def oxts_line(k: int, fix=None, velocity=(0.1, 0.1, 0.1), rate=(0.1, 0.1, 0.1)) -> str:
+    """The devkit's formulas inverted: the fix and angles that give ``world_from_imu(k)`` (or the
+    pose ``fix``), with the record's velocity (vf, vl, vu) and angular rate (wf, wl, wu)."""
+    pose = world_from_imu(k) if fix is None else fix
     scale = np.cos(LAT0 * np.pi / 180.0)
-    t = mercator(LAT0, LON0, ALT0, scale) + world_from_imu(k)[:3, 3]
+    t = mercator(LAT0, LON0, ALT0, scale) + pose[:3, 3]
     lon = t[0] * 180.0 / (scale * np.pi * EARTH_RADIUS_M)
     lat = np.arctan(np.exp(t[1] / (scale * EARTH_RADIUS_M))) * 360.0 / np.pi - 90.0
-    R = world_from_imu(k)[:3, :3]
+    R = pose[:3, :3]
     yaw, pitch, roll = np.arctan2(R[1, 0], R[0, 0]), -np.arcsin(R[2, 0]), np.arctan2(R[2, 1], R[2, 2])
-    rest = [0.1] * 17 + [0.5, 0.05] + [4, 11, 5, 5, 5]
+    rest = [0.1, 0.1, *velocity] + [0.1] * 9 + [*rate] + [0.5, 0.05] + [4, 11, 5, 5, 5]
     return " ".join(repr(float(v)) for v in [lat, lon, t[2], roll, pitch, yaw]) + " " + " ".join(map(str, rest))
 
 
@@ -224,6 +227,48 @@ def test_the_tracklet_comes_back_as_an_existing_actor(package, capsys):
     assert car.id == "tracklet_0" and car.kind == "existing" and car.splats is None
     assert np.allclose(car.wlh, CAR_WLH, rtol=0, atol=1e-12)
     drives.assert_actor_poses(package, car, lambda k: None if k == 0 else car_box(k), TOL_M)
+
+
+LAGS_S = [0.0016, 0.0082, 0.0049, 0.0014, 0.0079, 0.0044, 0.0111, 0.0077]  # fix to image, drive 0009's
+VELOCITY, RATE = (10.6, 0.03, -0.02), (0.002, -0.004, 0.024)  # m/s and rad/s along and about the IMU's axes
+
+
+def lagging_drive(drive, root):
+    """(``drive`` copied with each OXTS fix ``LAGS_S`` before its frame's images, taken while the
+    IMU moved at ``VELOCITY`` and turned at ``RATE``: where the known pose was that long before;
+    the first fix, the source frame's origin)."""
+    import shutil
+
+    out = root / DATE / drive.name
+    shutil.copytree(drive.parent, root / DATE)
+    stamps, fixes = [], []
+    for k, lag in enumerate(LAGS_S):
+        image_time = world_from_imu(k)
+        R = image_time[:3, :3] @ rotation_vector_matrix(-np.asarray(RATE) * lag)
+        fixes.append(rigid(R, image_time[:3, 3] - R @ np.asarray(VELOCITY) * lag))
+        (out / "oxts" / "data" / f"{k:010d}.txt").write_text(oxts_line(k, fixes[-1], VELOCITY, RATE) + "\n")
+        ns = FIRST_NS + drives.STEP_NS * k - round(lag * 1e9)
+        stamps.append(f"2011-09-26 13:02:{25 + ns // 10**9:02d}.{ns % 10**9:09d}\n")
+    (out / "oxts" / "timestamps.txt").write_text("".join(stamps))
+    return out, fixes[0][:3, 3]
+
+
+def test_each_pose_is_carried_from_its_fix_to_its_image_time(drive, tmp_path):
+    """A fix a few milliseconds before its images is carried to the images' time by the record's
+    velocity and angular rate; without the OXTS times the fix is taken as it is (the devkit's)."""
+    lagging, origin = lagging_drive(drive, tmp_path)
+    shift = rigid(np.eye(3), -origin)
+    d = read_kitti_raw(lagging)
+    for k, (cam2, cam3) in enumerate(zip(*d.source.grouped.table)):
+        assert np.abs(cam2.c2w - shift @ world_from_camera(2, k)).max() < TOL_M
+        assert np.abs(cam3.c2w - shift @ world_from_camera(3, k)).max() < TOL_M
+    assert d.source.notes["oxts_to_image_s"] == pytest.approx({"min": min(LAGS_S), "max": max(LAGS_S)}, abs=1e-9)
+    (lagging / "oxts" / "timestamps.txt").unlink()
+    d = read_kitti_raw(lagging)
+    moved_by = [np.linalg.norm(cam2.c2w[:3, 3] - (shift @ world_from_camera(2, k))[:3, 3]) for k, cam2 in
+                enumerate(d.source.grouped.table[0])]
+    assert np.allclose(moved_by, np.linalg.norm(VELOCITY) * np.asarray(LAGS_S), rtol=0.02)
+    assert d.source.notes["oxts_to_image_s"] is None
 
 
 def test_pykitti_reads_the_same_poses_and_calibration(drive):
