@@ -52,11 +52,10 @@ def _jitter(args) -> int:
 def _fit(folder: Path, package):
     """(background, actors, their shadow layers, the package placing the vehicles where this fit
     placed them)."""
-    from symdrive_core.optim.pose_refine import read_refined, with_refined
-    from symdrive_core.optim.reconstruct import read_reconstruction
+    from symdrive_core.optim.reconstruct import as_fitted, read_reconstruction
     from symdrive_core.scene import load_manifest
 
-    return *read_reconstruction(folder), with_refined(load_manifest(package), read_refined(folder))
+    return *read_reconstruction(folder), as_fitted(load_manifest(package), folder)
 
 
 def _score(args) -> int:

@@ -121,8 +121,7 @@ def main(argv=None) -> int:
 
     from symdrive_core.eval.edits import evaluate_decomposition
     from symdrive_core.io.atomic import write_text_atomic
-    from symdrive_core.optim.pose_refine import read_refined, with_refined
-    from symdrive_core.optim.reconstruct import read_reconstruction
+    from symdrive_core.optim.reconstruct import as_fitted, read_reconstruction
     from symdrive_core.scene import load_manifest
 
     manifest = load_manifest(args.package)
@@ -134,7 +133,7 @@ def main(argv=None) -> int:
     for spec in args.fit:
         name, _, folder = spec.partition("=")
         background, actors, shadows = read_reconstruction(Path(folder))
-        m = with_refined(load_manifest(args.package), read_refined(Path(folder)))  # changes it in place
+        m = as_fitted(load_manifest(args.package), Path(folder))
         by_camera = {c: evaluate_decomposition(m, background, actors, shadows=shadows, masks=boxes[c], camera=c)
                      for c in boxes}
         results[name] = {"label_boxes": evaluate_decomposition(m, background, actors, shadows=shadows, masks=masks),

@@ -89,6 +89,10 @@ def add_commands(sub) -> None:
     p.add_argument("--vehicle-alpha-weight", type=loss_weight, metavar="W",
                    help="cost of each pixel a recorded vehicle covers, so its Gaussians draw only what the background "
                         f"behind it does not (default {default_of(ReconstructConfig, 'vehicle_alpha_weight')}; 0: off)")
+    p.add_argument("--refine-cameras", action=argparse.BooleanOptionalAction, default=None, dest="refine_cameras",
+                   help="learn a correction of each frame's camera poses (the rig together) with the Gaussians, "
+                        "written back as the cameras' poses (the recording's kept as recorded_camera_to_world) "
+                        f"(default enabled: {default_of(ReconstructConfig, 'camera_refine.enabled')})")
     p.add_argument("--lateral", action="store_true", help="also score the result at the lateral ground truth")
     p.add_argument("--no-link", action="store_true",
                    help="do not point the manifest's background.splats (and the recorded vehicles' assets.splats) at "
@@ -101,6 +105,7 @@ def add_commands(sub) -> None:
 def _reconstruct(args) -> int:
     import json
 
+    from ..optim.camera_refine import with_refined_cameras
     from ..optim.pose_refine import with_refined
     from ..optim.reconstruct import SHADOW_SUFFIX, reconstruct
     from ..scene import ManifestError, is_inside, load_manifest
@@ -111,6 +116,7 @@ def _reconstruct(args) -> int:
                                     densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
+    cfg.camera_refine = replace(cfg.camera_refine, **given(args, enabled="refine_cameras"))
     cfg.sky = replace(cfg.sky, **given(args, "sensor_dome_deg", skyline="sky_skyline"))
     if args.static:
         cfg.decompose = False
@@ -124,6 +130,7 @@ def _reconstruct(args) -> int:
                             "pass --out", "reconstruction")
     result = reconstruct(manifest, out, cfg, resume=args.resume, progress=not args.quiet)
     with_refined(manifest, result.poses)  # scored, and linked, where the vehicles were fitted
+    with_refined_cameras(manifest, result.cameras)  # and the cameras
     metrics = result.metrics
     if metrics["heldout_frames"] or args.lateral:
         from ..eval.views import evaluate_heldout, evaluate_lateral

@@ -56,6 +56,19 @@ class PoseRefineConfig:
 
 
 @dataclass
+class CameraRefineConfig:
+    """Per-frame corrections of the recorded camera poses, fitted with the Gaussians (``camera_refine.py``)."""
+
+    enabled: bool = False
+    start_fraction: float = 0.1  # corrections wait until then, once the Gaussians look like the street
+    lr_rad: float = 2e-4  # Adam's step of the rotation vectors, radians per iteration
+    lr_m: float = 2e-3  # and of the translations, metres
+    prior_rad: float = 0.01  # the pull towards the recorded poses assumes errors of this size
+    prior_m: float = 0.2
+    weight: float = 1e-3  # of the pull against one view's photometric loss
+
+
+@dataclass
 class SkyConfig:
     """Where the sky dome starts in a view without depth (:mod:`.sky`)."""
 
@@ -123,6 +136,7 @@ class ReconstructConfig:
     # their spread, and on the Cycles traffic street it cost the removals 1.7 dB (docs/results.md).
     vehicle_alpha_weight: float = 0.0
     pose_refine: PoseRefineConfig = field(default_factory=PoseRefineConfig)
+    camera_refine: CameraRefineConfig = field(default_factory=CameraRefineConfig)
     # Where the scene has a sun, each recorded vehicle's shadow is a layer fitted with the
     # Gaussians (:mod:`.recorded_shadows`), at this learning rate on its occlusion logits.
     shadow_lr: float = 0.05

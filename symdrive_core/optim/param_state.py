@@ -46,6 +46,7 @@ class SideParameters:
 
     checkpoint_file: str
     opt: torch.optim.Adam | None
+    start: int = 0  # the first iteration whose gradient is applied
 
     def params(self) -> dict[str, torch.nn.Parameter]:
         raise NotImplementedError
@@ -54,8 +55,9 @@ class SideParameters:
         if self.opt is not None:
             self.opt.zero_grad(set_to_none=True)
 
-    def step(self) -> None:
-        if self.opt is not None:
+    def step_at(self, it: int) -> None:
+        """Apply iteration ``it``'s gradient, from ``start`` on."""
+        if self.opt is not None and it >= self.start:
             self.opt.step()
 
     def checkpoint(self, folder: Path) -> None:

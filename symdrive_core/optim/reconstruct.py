@@ -37,6 +37,15 @@ from ..scene.ground_truth import split_frames
 from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
 from . import decompose, pose_refine
+from .camera_refine import (
+    CameraRefinement,
+    corrected_layers,
+    read_cameras,
+    recorded_views,
+    refined_poses,
+    with_refined_cameras,
+    write_cameras,
+)
 from .config import DensifyConfig, ReconstructConfig, SkyConfig
 from .densify import GradStats, densify_and_prune, ndc_gradient_norm, prune
 from .exposure import Exposure
@@ -282,27 +291,33 @@ class Part:
         return gaussians_from_params(self.params)
 
 
-def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool):
+def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool,
+                 cameras: CameraRefinement | None = None):
     """(rgb, alpha, info, present parts) of ``view``: the background alone through
     :func:`render_params` (a drive without recorded vehicles trains as it always has), else every
-    part present at the frame composed in one rasterizer call."""
-    if len(parts) == 1 and parts[0].poses is None:
+    part present at the frame composed in one rasterizer call, seen from the frame's corrected
+    camera where ``cameras`` refines them."""
+    if len(parts) == 1 and parts[0].poses is None and cameras is None:
         return (*render_params(parts[0].params, view.K, view.viewmat, view.width, view.height, degree,
                                render_depth=render_depth), parts)
     present = [p for p in parts if p.present(view.frame)]
-    out = render_layers([p.layer(view.frame, degree) for p in present], view.viewmat.double(), view.K,
-                        view.width, view.height, cull=False)
+    layers = [p.layer(view.frame, degree) for p in present]
+    if cameras is not None:
+        layers = corrected_layers(layers, cameras.world_inverse(view.frame))
+    out = render_layers(layers, view.viewmat.double(), view.K, view.width, view.height, cull=False)
     return out["rgb"], out["alpha"], out["info"], present
 
 
 def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructConfig, start: int, *,
               until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None,
-              shadows: RecordedShadows | None = None, exposure: Exposure | None = None) -> dict:
+              shadows: RecordedShadows | None = None, exposure: Exposure | None = None,
+              cameras: CameraRefinement | None = None) -> dict:
     """Optimise ``parts`` jointly against ``views`` from iteration ``start`` to ``until`` (default
     ``cfg.iters``; a fit run in segments passes its :class:`Levels` so a coarse level is computed
     once): the training loop with density control per part (``keep(part) -> [N] bool``, optional:
     which Gaussians a part may keep after each density step; ``shadows``, optional: the recorded
-    vehicles' shadows laid on each render; ``exposure``, optional: each view's colour transform).
+    vehicles' shadows laid on each render; ``exposure``, optional: each view's colour transform;
+    ``cameras``, optional: the recorded camera poses' corrections).
     Every schedule is a function of the iteration, so a resumed fit continues it where it stopped. Returns a log (start iteration,
     seconds, the iteration each image downscale began at, densification steps)."""
     from tqdm import tqdm
@@ -316,7 +331,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
     refining = [p.refine for p in parts if p.refine is not None]
-    extras = [x for x in (shadows, exposure) if x is not None]  # fitted beside the Gaussians
+    extras = [x for x in (shadows, exposure, cameras) if x is not None]  # fitted beside the Gaussians
     log = {"resumed_from": start, "downscale": [], "densify": []}
     t0 = time.perf_counter()
     bar = tqdm(range(start, until), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
@@ -332,7 +347,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                 if group["name"] == "means" and not part.fixed:
                     group["lr"] = position_lr(cfg, part.extent, it)
         degree = cfg.sh_degree_at(it)
-        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0)
+        rgb, alpha, info, present = render_parts(parts, view, degree, depth_weight > 0, cameras)
         if shadows is not None:
             rgb = shadows.apply(rgb, info, view, present)
         if exposure is not None:
@@ -349,6 +364,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         prior = None if exposure is None else exposure.penalty(n_views)
         if prior is not None:
             loss = loss + prior
+        if cameras is not None:
+            loss = loss + cameras.penalty(n_views)
         for part in parts:
             part.opt.zero_grad(set_to_none=True)
         for extra in extras:
@@ -366,7 +383,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         for part in parts:
             part.opt.step()
         for extra in extras:
-            extra.step()
+            extra.step_at(it)
         for r in refining:
             r.step(it)
         step = it + 1
@@ -425,6 +442,7 @@ class ReconstructResult:
     poses: dict[str, list] = field(default_factory=dict)  # tracked vehicles' refined poses, per frame
     shadows: dict[str, ShadowLayer] = field(default_factory=dict)  # recorded vehicles' shadow layers
     exposure: dict[str, np.ndarray] = field(default_factory=dict)  # cameras' colour transforms [3, 4]
+    cameras: dict[str, list[np.ndarray]] = field(default_factory=dict)  # refined camera-to-world per frame
 
 
 def vehicle_start(track: decompose.Track, views: list[View], n: int, rng: np.random.Generator) -> Gaussians:
@@ -500,6 +518,7 @@ class Fit:
     shadows: RecordedShadows | None = None  # the recorded vehicles' shadows, where the scene has a sun
     exposure: Exposure | None = None  # the cameras' colour transforms, where more than one trains
     sky: Part | None = None  # the sensor dome (one of ``parts``), where the depth is a sensor's
+    cameras: CameraRefinement | None = None  # the recorded camera poses' corrections, where refined
 
     @staticmethod
     def start(manifest: Manifest, cfg: ReconstructConfig, out: Path | None = None, resume: bool = False) -> Fit:
@@ -510,6 +529,8 @@ class Fit:
         cfg = replace(cfg, depth_weight=max(weights.values()))
         train_frames, heldout = split_frames(manifest, cfg.holdout_every)
         views = load_views(manifest, train_frames, depth=True)
+        if cfg.camera_refine.enabled:
+            views = recorded_views(manifest, views)
         tracks = decompose.tracks(manifest) if cfg.decompose else []
         tracks, refine = pose_refine.refinements(manifest, tracks, cfg)
         checkpoint = None if out is None else Checkpoint(out / "checkpoint")
@@ -531,16 +552,17 @@ class Fit:
         views = [v if weights[v.camera_name] else replace(v, depth=None) for v in views]
         shadows = RecordedShadows.of(manifest, tracks, cfg.shadow_lr)
         exposure = Exposure.of(views, cfg.exposure, cfg.lr_exposure)
+        cams = CameraRefinement.of(views, len(manifest.frames), cfg.camera_refine, cfg.iters)
         if resume and checkpoint is not None:
-            for extra in (x for x in (shadows, exposure) if x is not None):
+            for extra in (x for x in (shadows, exposure, cams) if x is not None):
                 extra.resume(checkpoint.folder)
         return Fit(cfg, Levels(views), parts, keep_in_role(tracks) if tracks else None, start, train_frames, heldout,
-                   extent, shadows, exposure, sky)
+                   extent, shadows, exposure, sky, cams)
 
     def train(self, until: int | None = None, progress: bool = True) -> dict:
         """Train to iteration ``until`` (default: the end); :func:`fit_parts`' log."""
         log = fit_parts(self.levels, self.parts, self.cfg, self.iteration, until=until, progress=progress,
-                        keep=self.keep, shadows=self.shadows, exposure=self.exposure)
+                        keep=self.keep, shadows=self.shadows, exposure=self.exposure, cameras=self.cameras)
         self.iteration = self.cfg.iters if until is None else min(until, self.cfg.iters)
         return log
 
@@ -571,6 +593,13 @@ def read_reconstruction(folder: Path) -> tuple[Gaussians, dict[str, Gaussians], 
     return read_splats(folder / "background.ply"), actors, shadows
 
 
+def as_fitted(manifest: Manifest, folder: Path) -> Manifest:
+    """``manifest`` (changed in place, and returned) with its tracked vehicles and cameras where the
+    reconstruction in ``folder`` fitted them (its refined poses, where it refined any)."""
+    return with_refined_cameras(pose_refine.with_refined(manifest, pose_refine.read_refined(folder)),
+                                read_cameras(folder))
+
+
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
                 resume: bool = False, progress: bool = True) -> ReconstructResult:
     """Fit the training frames: background Gaussians, and with ``cfg.decompose`` one set per
@@ -579,9 +608,10 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     (the fit: iterations, timings, frames), where tracked vehicles' poses were refined
     (:mod:`.pose_refine`), ``out/poses.json``, and where the scene has a sun each vehicle's shadow
     layer (:mod:`.recorded_shadows`), ``out/actors/<id>.shadow.safetensors``, and where cameras'
-    colours were fitted (:mod:`.exposure`), ``out/exposure.json``. Scoring the result is the caller's
+    colours were fitted (:mod:`.exposure`), ``out/exposure.json``, and where the camera poses were
+    refined (:mod:`.camera_refine`), ``out/cameras.json``. Scoring the result is the caller's
     (``eval.views.evaluate_heldout`` on the held-out frames, ``pose_refine.with_refined`` placing
-    the vehicles where they were fitted)."""
+    the vehicles and ``camera_refine.with_refined_cameras`` the cameras where they were fitted)."""
     out = Path(out)
     run = Fit.start(manifest, cfg or ReconstructConfig(), out, resume)
     start = run.iteration
@@ -601,6 +631,9 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     for name, layer in shadows.items():
         layer.save(out / "actors" / f"{name}{SHADOW_SUFFIX}")
     corrections = {p.name: {"pose_correction": p.refine.corrections()} for p in run.parts if p.refine is not None}
+    cameras = {} if run.cameras is None else refined_poses(manifest, run.cameras)
+    if cameras:
+        write_cameras(out, cameras, run.cameras.corrections())
     metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),
                "seconds_per_iteration": round(seconds / max(run.cfg.iters - start, 1), 4),
                "gaussians": len(g), "train_frames": run.train_frames, "heldout_frames": run.heldout_frames,
@@ -609,6 +642,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
                "views": len(run.levels.views), "depth_weight": run.cfg.depth_weight, "downscale": log["downscale"],
                "densify": log["densify"], **({"pruned_at_end": log["pruned_at_end"]} if "pruned_at_end" in log else {}),
                "actors": {name: {"gaussians": len(ga), **corrections.get(name, {})} for name, ga in actors.items()},
-               **({"exposure": {cam: np.round(m, 4).tolist() for cam, m in exposure.items()}} if exposure else {})}
+               **({"exposure": {cam: np.round(m, 4).tolist() for cam, m in exposure.items()}} if exposure else {}),
+               **({"camera_correction": run.cameras.corrections()} if cameras else {})}
     write_text_atomic(out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
-    return ReconstructResult(g, metrics, out, actors, poses, shadows, exposure)
+    return ReconstructResult(g, metrics, out, actors, poses, shadows, exposure, cameras)

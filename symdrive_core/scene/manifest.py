@@ -58,6 +58,14 @@ class CameraFrame:
     world_to_camera: np.ndarray  # [4, 4]
     image: str | None = None  # ground-truth image, relative to the package
     depth: str | None = None
+    # The pose the recording gave, when a reconstruction refined ``camera_to_world`` (None: not
+    # refined): what a later refinement starts from again.
+    recorded_camera_to_world: np.ndarray | None = None
+
+    @property
+    def recorded(self) -> np.ndarray:
+        """The recording's camera-to-world, before any refinement."""
+        return self.camera_to_world if self.recorded_camera_to_world is None else self.recorded_camera_to_world
 
 
 @dataclass
@@ -247,6 +255,8 @@ class Manifest:
         def camera_frame(cf: CameraFrame) -> dict:
             d = {"K": cf.K.tolist(), "camera_to_world": cf.camera_to_world.tolist(),
                  "world_to_camera": cf.world_to_camera.tolist()}
+            if cf.recorded_camera_to_world is not None:
+                d["recorded_camera_to_world"] = cf.recorded_camera_to_world.tolist()
             if cf.image is not None:
                 d["image"] = cf.image
             if cf.depth is not None:
@@ -430,10 +440,16 @@ def _cameras(rd: _Reader, d: dict, nf: int) -> list[Camera]:
                     rd.fail(f"{wf}.world_to_camera", "is not the inverse of camera_to_world")
             else:
                 w2c = conventions.invert_rigid(c2w)
+            recorded = None
+            if cf.get("recorded_camera_to_world") is not None:
+                recorded = rd.matrix(cf["recorded_camera_to_world"], 4, 4, f"{wf}.recorded_camera_to_world")
+                if not conventions.is_rigid(recorded) or np.abs(recorded[:3, 3]).max() > COORD_MAX:
+                    rd.fail(f"{wf}.recorded_camera_to_world", "not a rigid transform within "
+                            f"{COORD_MAX:g} m (rotation orthonormal, det +1)")
             camera_frames.append(CameraFrame(
                 K, c2w, w2c,
                 rd.ref(cf.get("image"), f"{wf}.image"),
-                rd.ref(cf.get("depth"), f"{wf}.depth")))
+                rd.ref(cf.get("depth"), f"{wf}.depth"), recorded))
         cameras.append(Camera(cname, width, height, camera_frames, depth_zero))
     if not cameras:
         rd.fail("cameras", "expected at least one camera")

@@ -114,11 +114,11 @@ def _recording(monkeypatch, stop_after=None):
     """Record (width, SH degree) of every training step; raise after ``stop_after`` steps (a killed run)."""
     seen = []
 
-    def recorded(parts, view, degree, render_depth):
+    def recorded(parts, view, degree, render_depth, cameras=None):
         if stop_after is not None and len(seen) == stop_after:
             raise Killed
         seen.append((view.width, degree))
-        return RENDER_PARTS(parts, view, degree, render_depth)
+        return RENDER_PARTS(parts, view, degree, render_depth, cameras)
 
     monkeypatch.setattr(rec, "render_parts", recorded)
     return seen
