@@ -130,8 +130,8 @@ def refined(tmp_path_factory):
     root, _ = write_package(tmp_path_factory.mktemp("cams") / "pkg", n_frames=8, offsets=())
     truth = _perturbed(root, PERTURBED, np.radians(1.5), 0.06)
     m = load_manifest(root)
-    cfg = ReconstructConfig(iters=600, seed=0, camera_refine=CameraRefineConfig(enabled=True, lr_rad=1e-3,
-                                                                                lr_m=4e-3))
+    cfg = ReconstructConfig(iters=300, seed=0, camera_refine=CameraRefineConfig(enabled=True, lr_rad=2e-3,
+                                                                                lr_m=8e-3))
     out = tmp_path_factory.mktemp("fit")
     return m, truth, reconstruct(m, out, cfg, progress=False), out
 
@@ -140,7 +140,7 @@ def test_poses_the_recording_put_off_come_back_nearer_the_truth(refined):
     m, truth, result, out = refined
     before = [_angle_deg(truth[f], m.cameras[0].frames[f].camera_to_world) for f in PERTURBED]
     after = [_angle_deg(truth[f], result.cameras["front"][f]) for f in PERTURBED]
-    assert np.mean(after) < 0.5 * np.mean(before), (before, after)
+    assert all(a < b for a, b in zip(after, before)) and np.mean(after) < 0.6 * np.mean(before), (before, after)
     np.testing.assert_allclose(read_cameras(out)["front"][3], result.cameras["front"][3], atol=1e-8)
     assert result.metrics["camera_correction"]["mean_deg"] > 0.3
 
