@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import link_or_copy
 from ..io.atomic import atomic_directory
-from ..scene import CameraFrame, Manifest, check_files, parse_manifest
+from ..scene import Manifest, check_files, parse_manifest
 from ..scene.road import Road
 from .actors import traffic_actors
 from .assets import Asset
@@ -42,8 +42,8 @@ def traffic_manifest(src: Manifest, road: Road, run: TrafficRun, assets: list[As
     actors = traffic_actors(run.tracks, {a.name: a for a in assets}, road, times, out, run.network.offset)
     gaps = check_actors(actors, len(src.frames))
     require_no_overlap(gaps)
-    cameras = [replace(c, frames=[CameraFrame(cf.K, cf.camera_to_world, cf.world_to_camera,
-                                              _relocate(cf.image, src_root, out), _relocate(cf.depth, src_root, out))
+    cameras = [replace(c, frames=[replace(cf, image=_relocate(cf.image, src_root, out),
+                                          depth=_relocate(cf.depth, src_root, out))
                                   for cf in c.frames]) for c in src.cameras]
     traffic = {
         "density_per_km_lane": opt.density, "seconds": opt.seconds, "seed": opt.seed, "speed_mps": opt.speed,
