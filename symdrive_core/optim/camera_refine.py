@@ -106,10 +106,9 @@ class CameraRefinement(SideParameters):
         """``c2w`` [4, 4] of a camera at ``frame`` moved by that frame's correction."""
         with torch.no_grad():
             R, T = self.world_inverse(frame)
-        W = np.eye(4)
-        W[:3, :3] = R.numpy().T
-        W[:3, 3] = -R.numpy().T @ T.numpy()
-        return W @ c2w
+        inverse = np.eye(4)
+        inverse[:3, :3], inverse[:3, 3] = R.numpy(), T.numpy()
+        return invert_rigid(inverse) @ c2w
 
     def corrections(self) -> dict:
         """Mean and largest correction (cm, degrees) over the trained frames."""
@@ -153,9 +152,9 @@ def recorded_views(manifest: Manifest, views: list) -> list:
     holds its refined ones): what a refinement starts from."""
     out = []
     for v in views:
-        cf = manifest.camera(v.camera_name).frames[v.frame]
-        w2c = torch.tensor(invert_rigid(cf.recorded), dtype=torch.float32)
-        out.append(v if cf.recorded_camera_to_world is None else replace(v, viewmat=w2c))
+        recorded = manifest.camera(v.camera_name).frames[v.frame].recorded_camera_to_world
+        out.append(v if recorded is None else
+                   replace(v, viewmat=torch.tensor(invert_rigid(recorded), dtype=torch.float32)))
     return out
 
 
