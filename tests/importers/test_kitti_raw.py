@@ -324,6 +324,13 @@ def test_missing_oxts_file(bad, tmp_path, capsys):
     refused(bad, tmp_path, capsys, "0000000003.txt", "oxts", "not found")
 
 
+def test_oxts_times_short_of_the_frames(bad, tmp_path, capsys):
+    """The fixes' times carry each pose to its image's: a file that stops early is refused by name."""
+    stamps = bad / "oxts" / "timestamps.txt"
+    stamps.write_text("".join(stamps.read_text().splitlines(keepends=True)[:5]))
+    refused(bad, tmp_path, capsys, "oxts/timestamps.txt", "no time for frame 0000000005", "line 6")
+
+
 def test_missing_oxts_line(bad, tmp_path, capsys):
     (bad / "oxts" / "data" / "0000000003.txt").write_text("\n")
     refused(bad, tmp_path, capsys, "0000000003.txt", "line 1", "expected one line")
