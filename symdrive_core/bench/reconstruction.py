@@ -61,7 +61,6 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
     scored at iteration 0 and every ``every`` iterations to its end."""
     from tqdm import tqdm
 
-    from ..eval.views import evaluate_heldout
     from ..optim.reconstruct import Fit
 
     fits = {name: Fit.start(manifest, cfg) for name, cfg in configs.items()}
@@ -69,8 +68,7 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
     rows = []
 
     def score(name: str, fit: Fit) -> None:
-        g, actors = fit.gaussians()
-        q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors, shadows=fit.layers())
+        q = fit.heldout_scores(manifest)
         rows.append({"schedule": name, "iteration": fit.iteration, "seconds": round(seconds[name], 3),
                      "psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"],
                      "gaussians": sum(len(p.params["means"]) for p in fit.parts)})
@@ -164,7 +162,6 @@ def reconstruction_settings(manifest, iters: int) -> list:
     budget; the config's default takes longer, and :func:`curves` gives PSNR at every iteration
     count), each schedule of :data:`SCHEDULES` and an earlier end of densification, each scored on
     the held-out frames; seconds per run, training alone. A setting the rows share is fitted once."""
-    from ..eval.views import evaluate_heldout
     from ..optim.reconstruct import Fit
     from .accuracy_time import Setting
 
@@ -178,8 +175,7 @@ def reconstruction_settings(manifest, iters: int) -> list:
             if key not in done:
                 fit = Fit.start(manifest, cfg)
                 seconds = fit.train(progress=False)["seconds"]
-                g, actors = fit.gaussians()
-                q = evaluate_heldout(manifest, g, fit.heldout_frames, actors=actors, shadows=fit.layers())
+                q = fit.heldout_scores(manifest)
                 done[key] = {"psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"], "seconds": seconds, "per": "run"}
             return dict(done[key])
         return run
