@@ -9,6 +9,7 @@ to reach the held-out PSNR the default schedule ends at, as a ratio of the defau
 
 from __future__ import annotations
 
+import copy
 import csv
 import json
 from dataclasses import asdict, replace
@@ -56,6 +57,23 @@ def default_name(configs: dict[str, ReconstructConfig], pixels: int) -> str:
     return next((n for n, c in configs.items() if c == default_config(c.iters, pixels)), next(iter(configs)))
 
 
+def heldout_scores(manifest, fit) -> dict:
+    """``eval.views.evaluate_heldout`` of a :class:`~symdrive_core.optim.reconstruct.Fit` as it
+    stands, scored as ``symdrive reconstruct`` scores its end: the vehicles and cameras where the fit
+    placed them, each camera through its colour transform. ``manifest`` stays as recorded (a copy
+    is placed)."""
+    from ..eval.views import evaluate_heldout
+    from ..optim.camera_refine import refined_poses, with_refined_cameras
+    from ..optim.pose_refine import with_refined
+
+    placed = with_refined(copy.deepcopy(manifest), fit.poses())
+    if fit.cameras is not None:
+        with_refined_cameras(placed, refined_poses(placed, fit.cameras))
+    g, actors = fit.gaussians()
+    return evaluate_heldout(placed, g, fit.heldout_frames, actors=actors, shadows=fit.layers(),
+                            exposure=None if fit.exposure is None else fit.exposure.by_camera())
+
+
 def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress: bool = True) -> list[dict]:
     """Rows (schedule, iteration, seconds of training so far, psnr, ssim, gaussians), each schedule
     scored at iteration 0 and every ``every`` iterations to its end."""
@@ -68,7 +86,7 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
     rows = []
 
     def score(name: str, fit: Fit) -> None:
-        q = fit.heldout_scores(manifest)
+        q = heldout_scores(manifest, fit)
         rows.append({"schedule": name, "iteration": fit.iteration, "seconds": round(seconds[name], 3),
                      "psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"],
                      "gaussians": sum(len(p.params["means"]) for p in fit.parts)})
@@ -175,7 +193,7 @@ def reconstruction_settings(manifest, iters: int) -> list:
             if key not in done:
                 fit = Fit.start(manifest, cfg)
                 seconds = fit.train(progress=False)["seconds"]
-                q = fit.heldout_scores(manifest)
+                q = heldout_scores(manifest, fit)
                 done[key] = {"psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"], "seconds": seconds, "per": "run"}
             return dict(done[key])
         return run

@@ -16,7 +16,6 @@ stopped.
 
 from __future__ import annotations
 
-import copy
 import json
 import time
 from collections.abc import Callable
@@ -582,19 +581,6 @@ class Fit:
     def poses(self) -> dict[str, list]:
         """The tracked vehicles' refined poses as they stand, by actor id (per frame, None: no box)."""
         return {p.name: p.refine.refined() for p in self.parts if p.refine is not None}
-
-    def heldout_scores(self, manifest: Manifest) -> dict:
-        """``eval.views.evaluate_heldout`` of the fit as it stands, scored as ``symdrive reconstruct``
-        scores its end: the vehicles and cameras where the fit placed them, each camera through its
-        colour transform. ``manifest`` stays as recorded (a copy is placed)."""
-        from ..eval.views import evaluate_heldout
-
-        placed = pose_refine.with_refined(copy.deepcopy(manifest), self.poses())
-        if self.cameras is not None:
-            with_refined_cameras(placed, refined_poses(placed, self.cameras))
-        g, actors = self.gaussians()
-        return evaluate_heldout(placed, g, self.heldout_frames, actors=actors, shadows=self.layers(),
-                                exposure=None if self.exposure is None else self.exposure.by_camera())
 
 
 def read_reconstruction(folder: Path) -> tuple[Gaussians, dict[str, Gaussians], dict[str, ShadowLayer]]:

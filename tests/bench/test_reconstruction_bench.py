@@ -1,16 +1,22 @@
 """Reconstruction schedules against time: the curves, the time to the default's PSNR, the rows of
 ``bench accuracy-time``."""
 
+import copy
 import json
 
 import pytest
 
 from symdrive_core.bench import reconstruction as bench
 from symdrive_core.bench.accuracy_time import run_settings
+from symdrive_core.eval.views import evaluate_heldout
 from symdrive_core.io.images import read_image
-from symdrive_core.optim.config import ReconstructConfig
+from symdrive_core.optim.config import PoseRefineConfig, ReconstructConfig
+from symdrive_core.optim.pose_refine import with_refined
+from symdrive_core.optim.reconstruct import Fit
 from symdrive_core.scene import load_manifest
 from tests.optim.conftest import write_package
+from tests.optim.moving_box import write_moving_box
+from tests.optim.test_multi_camera import BASELINE_M, add_camera
 
 TINY = dict(densify_from=10, densify_every=10, sky_points=0)
 
@@ -71,3 +77,23 @@ def test_accuracy_time_rows_fit_a_shared_setting_once(package, monkeypatch):
     assert len(starts) == len({repr(c) for c in starts}) == 3  # full resolution, coarse to fine, densify until 0.3
     full = next(r for r in rows if r["value"] == "full resolution")
     assert full["default"] and full["psnr"] == next(r["psnr"] for r in rows if r["default"] and r["knob"] == "densify until")
+
+
+def test_a_fit_is_scored_between_segments_as_its_end_is(tmp_path):
+    """Through each camera's colour transform and with the vehicles where the fit placed them, as
+    ``symdrive reconstruct`` scores its end; the package stays as recorded."""
+    root, *_ = write_moving_box(tmp_path / "pkg")
+    m = add_camera(root, "right", BASELINE_M, colours=lambda rgb: rgb * [1.12, 1.05, 0.95] + [0.02, 0.0, -0.01])
+    recorded = [a.poses for a in m.actors]
+    fit = Fit.start(m, ReconstructConfig(iters=200, densify_from=100, densify_every=100, sky_points=0,
+                                         actor_points=600, sh_degree=0, lr_exposure=5e-3,
+                                         pose_refine=PoseRefineConfig(enabled=True, start_fraction=0.0)))
+    fit.train(progress=False)
+    assert set(fit.poses()) == {"car_1"}
+    got = bench.heldout_scores(m, fit)
+    g, actors = fit.gaussians()
+    placed = with_refined(copy.deepcopy(m), fit.poses())
+    assert got == evaluate_heldout(placed, g, fit.heldout_frames, actors=actors, exposure=fit.exposure.by_camera())
+    raw = evaluate_heldout(m, g, fit.heldout_frames, actors=actors)["cameras"]
+    assert got["cameras"]["right"]["psnr_heldout"] > raw["right"]["psnr_heldout"] + 1.0
+    assert [a.poses for a in m.actors] == recorded

@@ -2,17 +2,13 @@
 and warmer is fitted in the first camera's colours, its transform found, and its held-out views
 scored through it; the transforms resume exactly."""
 
-import copy
-
 import numpy as np
 import pytest
 import torch
 
 from symdrive_core.eval.views import evaluate_heldout
-from symdrive_core.optim.config import PoseRefineConfig
 from symdrive_core.optim.exposure import Exposure, read_exposure, recorded_colours
-from symdrive_core.optim.pose_refine import with_refined
-from symdrive_core.optim.reconstruct import Fit, ReconstructConfig, reconstruct
+from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
 from symdrive_core.optim.views import View
 from symdrive_core.scene.ground_truth import split_frames
 from tests.optim.moving_box import write_moving_box
@@ -113,23 +109,3 @@ def test_a_run_on_a_package_reconstructed_before_scores_through_the_transforms_b
     (tmp_path / "exposure.json").write_text('{"mode": "camera"}')
     with pytest.raises(InputError, match="exposure.json: cameras"):
         exposure(ctx)
-
-
-def test_a_fit_is_scored_mid_way_as_its_end_is(tinted_rig):
-    """A benchmark scores a fit between its segments: through the colour transforms and with the
-    vehicles where the fit placed them, as the end is scored, leaving the package as recorded."""
-    m = tinted_rig[0]
-    recorded = [a.poses for a in m.actors]
-    fit = Fit.start(m, ReconstructConfig(iters=200, densify_from=100, densify_every=100, sky_points=0,
-                                         actor_points=600, sh_degree=0, lr_exposure=5e-3,
-                                         pose_refine=PoseRefineConfig(enabled=True, start_fraction=0.0)))
-    fit.train(progress=False)
-    assert set(fit.poses()) == {"car_1"}
-    got = fit.heldout_scores(m)
-    g, actors = fit.gaussians()
-    placed = with_refined(copy.deepcopy(m), fit.poses())
-    want = evaluate_heldout(placed, g, fit.heldout_frames, actors=actors, exposure=fit.exposure.by_camera())
-    assert got == want
-    raw = evaluate_heldout(m, g, fit.heldout_frames, actors=actors)["cameras"]
-    assert got["cameras"]["right"]["psnr_heldout"] > raw["right"]["psnr_heldout"] + 1.0
-    assert [a.poses for a in m.actors] == recorded
