@@ -63,12 +63,9 @@ def heldout_scores(manifest, fit) -> dict:
     placed them, each camera through its colour transform. ``manifest`` stays as recorded (a copy
     is placed)."""
     from ..eval.views import evaluate_heldout
-    from ..optim.camera_refine import refined_poses, with_refined_cameras
-    from ..optim.pose_refine import with_refined
+    from ..optim.reconstruct import with_fitted
 
-    placed = with_refined(copy.deepcopy(manifest), fit.poses())
-    if fit.cameras is not None:
-        with_refined_cameras(placed, refined_poses(placed, fit.cameras))
+    placed = with_fitted(copy.deepcopy(manifest), fit.poses(), fit.camera_poses(manifest))
     g, actors = fit.gaussians()
     return evaluate_heldout(placed, g, fit.heldout_frames, actors=actors, shadows=fit.layers(),
                             exposure=None if fit.exposure is None else fit.exposure.by_camera())

@@ -105,9 +105,7 @@ def add_commands(sub) -> None:
 def _reconstruct(args) -> int:
     import json
 
-    from ..optim.camera_refine import with_refined_cameras
-    from ..optim.pose_refine import with_refined
-    from ..optim.reconstruct import SHADOW_SUFFIX, reconstruct
+    from ..optim.reconstruct import SHADOW_SUFFIX, reconstruct, with_fitted
     from ..scene import ManifestError, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
@@ -129,8 +127,7 @@ def _reconstruct(args) -> int:
         raise ManifestError(manifest.path or manifest.root, "'reconstruction' leads out of the package (a link); "
                             "pass --out", "reconstruction")
     result = reconstruct(manifest, out, cfg, resume=args.resume, progress=not args.quiet)
-    with_refined(manifest, result.poses)  # scored, and linked, where the vehicles were fitted
-    with_refined_cameras(manifest, result.cameras)  # and the cameras
+    with_fitted(manifest, result.poses, result.cameras)  # scored, and linked, where the fit placed them
     metrics = result.metrics
     if metrics["heldout_frames"] or args.lateral:
         from ..eval.views import evaluate_heldout, evaluate_lateral

@@ -582,6 +582,10 @@ class Fit:
         """The tracked vehicles' refined poses as they stand, by actor id (per frame, None: no box)."""
         return {p.name: p.refine.refined() for p in self.parts if p.refine is not None}
 
+    def camera_poses(self, manifest: Manifest) -> dict[str, list[np.ndarray]]:
+        """Every camera's refined camera-to-world per frame as they stand (empty: not refined)."""
+        return {} if self.cameras is None else refined_poses(manifest, self.cameras)
+
 
 def read_reconstruction(folder: Path) -> tuple[Gaussians, dict[str, Gaussians], dict[str, ShadowLayer]]:
     """(background, recorded vehicles by actor id, their shadow layers) as :func:`reconstruct`
@@ -593,11 +597,16 @@ def read_reconstruction(folder: Path) -> tuple[Gaussians, dict[str, Gaussians], 
     return read_splats(folder / "background.ply"), actors, shadows
 
 
+def with_fitted(manifest: Manifest, poses: dict[str, list], cameras: dict[str, list[np.ndarray]]) -> Manifest:
+    """``manifest`` (changed in place, and returned) with its tracked vehicles at a fit's refined
+    ``poses`` (by actor id) and its cameras at the fit's refined ``cameras`` (by camera name); what
+    a fit did not refine stays as recorded."""
+    return with_refined_cameras(pose_refine.with_refined(manifest, poses), cameras)
+
+
 def as_fitted(manifest: Manifest, folder: Path) -> Manifest:
-    """``manifest`` (changed in place, and returned) with its tracked vehicles and cameras where the
-    reconstruction in ``folder`` fitted them (its refined poses, where it refined any)."""
-    return with_refined_cameras(pose_refine.with_refined(manifest, pose_refine.read_refined(folder)),
-                                read_cameras(folder))
+    """:func:`with_fitted` with what the reconstruction in ``folder`` wrote."""
+    return with_fitted(manifest, pose_refine.read_refined(folder), read_cameras(folder))
 
 
 def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = None, *,
@@ -610,8 +619,8 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     layer (:mod:`.recorded_shadows`), ``out/actors/<id>.shadow.safetensors``, and where cameras'
     colours were fitted (:mod:`.exposure`), ``out/exposure.json``, and where the camera poses were
     refined (:mod:`.camera_refine`), ``out/cameras.json``. Scoring the result is the caller's
-    (``eval.views.evaluate_heldout`` on the held-out frames, ``pose_refine.with_refined`` placing
-    the vehicles and ``camera_refine.with_refined_cameras`` the cameras where they were fitted)."""
+    (``eval.views.evaluate_heldout`` on the held-out frames, :func:`with_fitted` placing the
+    vehicles and cameras where they were fitted)."""
     out = Path(out)
     run = Fit.start(manifest, cfg or ReconstructConfig(), out, resume)
     start = run.iteration
@@ -631,7 +640,7 @@ def reconstruct(manifest: Manifest, out: Path, cfg: ReconstructConfig | None = N
     for name, layer in shadows.items():
         layer.save(out / "actors" / f"{name}{SHADOW_SUFFIX}")
     corrections = {p.name: {"pose_correction": p.refine.corrections()} for p in run.parts if p.refine is not None}
-    cameras = {} if run.cameras is None else refined_poses(manifest, run.cameras)
+    cameras = run.camera_poses(manifest)
     if cameras:
         write_cameras(out, cameras, run.cameras.corrections())
     metrics = {"iterations": run.cfg.iters, "resumed_from": start, "seconds": round(seconds, 2),

@@ -213,14 +213,11 @@ def reconstruct_stage(ctx) -> StageResult:
     """Fit background Gaussians to the package's images (it had none); later stages read them
     from this run's output, the manifest stays as given on disk (its tracked vehicles and, where
     refined, its cameras placed at their refined poses in this run)."""
-    from ..optim.camera_refine import with_refined_cameras
-    from ..optim.pose_refine import with_refined
-    from ..optim.reconstruct import reconstruct
+    from ..optim.reconstruct import reconstruct, with_fitted
 
     out = ctx.tree.folder("reconstruction")
     result = reconstruct(ctx.manifest, out, resume=(out / "checkpoint").exists(), progress=ctx.progress)
-    with_refined(ctx.manifest, result.poses)
-    with_refined_cameras(ctx.manifest, result.cameras)
+    with_fitted(ctx.manifest, result.poses, result.cameras)
     ctx.shared.background_path = out / "background.ply"
     ctx.shared.actors = result.actors
     ctx.shared.shadows = result.shadows
