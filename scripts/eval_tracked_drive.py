@@ -19,6 +19,7 @@ A vehicle drives when its box's centre moves more than ``--moving-m`` in the pac
 over its frames (the parked cars' boxes drift with the labels' and the ego poses' jitter). Each
 fit is rendered with the vehicles where it placed them (its refined poses, where it has them)
 by :func:`symdrive_core.eval.edits.evaluate_decomposition`; a static fit has no vehicles.
+``--training-frames`` scores the frames the fits learnt from instead.
 """
 
 from __future__ import annotations
@@ -116,6 +117,9 @@ def main(argv=None) -> int:
     p.add_argument("--label-size", type=int, nargs=2, default=(1242, 375), metavar=("W", "H"),
                    help="the size of the images the labels were drawn on")
     p.add_argument("--frame-offset", type=int, default=0, help="the label frame of the package's frame 0")
+    p.add_argument("--training-frames", action="store_true",
+                   help="score the training frames instead: a fit that scores no higher there underfits, "
+                        "one that does fails to carry to the held-out frames")
     p.add_argument("--out", type=Path, default=Path("tracked.json"))
     args = p.parse_args(argv)
 
@@ -123,8 +127,10 @@ def main(argv=None) -> int:
     from symdrive_core.io.atomic import write_text_atomic
     from symdrive_core.optim.reconstruct import as_fitted, read_reconstruction
     from symdrive_core.scene import load_manifest
+    from symdrive_core.scene.ground_truth import split_frames
 
     manifest = load_manifest(args.package)
+    frames = split_frames(manifest)[0 if args.training_frames else 1]
     cam = manifest.cameras[0]
     ids = moving_tracks(manifest, args.moving_m)
     masks = label_masks(args.labels, ids, (cam.height, cam.width), tuple(args.label_size), args.frame_offset)
@@ -134,9 +140,10 @@ def main(argv=None) -> int:
         name, _, folder = spec.partition("=")
         background, actors, shadows = read_reconstruction(Path(folder))
         m = as_fitted(load_manifest(args.package), Path(folder))
-        by_camera = {c: evaluate_decomposition(m, background, actors, shadows=shadows, masks=boxes[c], camera=c)
+        by_camera = {c: evaluate_decomposition(m, background, actors, frames, shadows=shadows, masks=boxes[c], camera=c)
                      for c in boxes}
-        results[name] = {"label_boxes": evaluate_decomposition(m, background, actors, shadows=shadows, masks=masks),
+        results[name] = {"label_boxes": evaluate_decomposition(m, background, actors, frames, shadows=shadows,
+                                                               masks=masks),
                          "boxes": by_camera, "boxes_pooled": pooled(list(by_camera.values()))}
         print(name, json.dumps(results[name]), flush=True)
     write_text_atomic(args.out, json.dumps(results, indent=1) + "\n")

@@ -14,6 +14,7 @@ from symdrive_core.io.images import write_image, write_mask
 from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
 from symdrive_core.scene import Pose, load_manifest
 from symdrive_core.scene.camera import CameraView
+from symdrive_core.scene.ground_truth import split_frames
 from symdrive_core.splat.render import render_scene
 from symdrive_core.splat.tensors import GaussianTensors
 from tests.optim.moving_box import box_pose, street, traffic_truth_entries
@@ -149,6 +150,13 @@ def test_a_real_drives_label_boxes_score_its_moving_vehicles(traffic_truth, tmp_
     assert scored["boxes"] == {m.cameras[0].name: evaluate_decomposition(m, decomposed.gaussians, decomposed.actors,
                                                                          masks=boxes)}
     assert scored["boxes_pooled"] == scored["boxes"][m.cameras[0].name]  # one camera: pooled is its score
+    # the frames the fit learnt from, on request
+    assert script.main([str(root), str(labels), "--fit", f"decomposed={root / 'reconstruction'}",
+                        "--label-size", *map(str, size), "--out", str(out), "--training-frames"]) == 0
+    train = [f for f in split_frames(m)[0] if f in rects]
+    trained = json.loads(out.read_text())["decomposed"]["label_boxes"]
+    assert train and trained == evaluate_decomposition(m, decomposed.gaussians, decomposed.actors, train, masks=rects)
+    assert trained["frames"] == len(train) != scored["label_boxes"]["frames"]
 
 
 def test_projected_boxes_hold_the_vehicles_surface(traffic_truth):
