@@ -89,6 +89,9 @@ def add_commands(sub) -> None:
     p.add_argument("--vehicle-alpha-weight", type=loss_weight, metavar="W",
                    help="cost of each pixel a recorded vehicle covers, so its Gaussians draw only what the background "
                         f"behind it does not (default {default_of(ReconstructConfig, 'vehicle_alpha_weight')}; 0: off)")
+    p.add_argument("--driving-view-repeat", type=positive_int, metavar="N",
+                   help="views that show a recorded vehicle driving come N times in each pass over the views "
+                        f"(default {default_of(ReconstructConfig, 'driving_view_repeat')}; 1: once, as every other view)")
     p.add_argument("--refine-cameras", action=argparse.BooleanOptionalAction, default=None, dest="refine_cameras",
                    help="learn a correction of each frame's camera poses (the rig together) with the Gaussians, "
                         "written back as the cameras' poses (the recording's kept as recorded_camera_to_world) "
@@ -110,7 +113,7 @@ def _reconstruct(args) -> int:
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
-                                    "max_init_points", "seed", "exposure", "vehicle_alpha_weight",
+                                    "max_init_points", "seed", "exposure", "vehicle_alpha_weight", "driving_view_repeat",
                                     densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))

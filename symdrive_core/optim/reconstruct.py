@@ -308,6 +308,22 @@ def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool,
     return out["rgb"], out["alpha"], out["info"], present
 
 
+def driving(part: Part, min_move_m: float) -> bool:
+    """Whether ``part`` is a recorded vehicle whose box's centre moves more than ``min_move_m``."""
+    if part.poses is None:
+        return False
+    centres = np.array([p.translation for p in part.poses if p is not None])
+    return len(centres) > 1 and float(np.linalg.norm(centres.max(0) - centres.min(0))) > min_move_m
+
+
+def view_pool(views: list[View], parts: list[Part], cfg: ReconstructConfig) -> np.ndarray:
+    """One pass over the views, as indices into ``views``: each once, and those showing a driving
+    vehicle ``cfg.driving_view_repeat`` times in all (each pass is shuffled)."""
+    movers = [p for p in parts if driving(p, cfg.driving_m)]
+    repeated = [i for i, v in enumerate(views) if any(m.present(v.frame) for m in movers)]
+    return np.array(list(range(len(views))) + repeated * (cfg.driving_view_repeat - 1), dtype=np.int64)
+
+
 def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructConfig, start: int, *,
               until: int | None = None, progress: bool = True, desc: str = "reconstruct", keep=None,
               shadows: RecordedShadows | None = None, exposure: Exposure | None = None,
@@ -327,6 +343,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     levels = views if isinstance(views, Levels) else Levels(views)
     cfg = replace(cfg, resolution_schedule=cfg.schedule_for(max(v.width * v.height for v in levels.views)))
     n_views = len(levels.views)
+    pool = view_pool(levels.views, parts, cfg)
     until = cfg.iters if until is None else min(until, cfg.iters)
     densify_until = int(cfg.densify_until_fraction * cfg.iters)
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
@@ -336,8 +353,8 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     t0 = time.perf_counter()
     bar = tqdm(range(start, until), desc=desc, unit="it", disable=not progress, initial=start, total=cfg.iters)
     for it in bar:
-        epoch, pos = divmod(it, n_views)
-        order = np.random.default_rng((cfg.seed, epoch)).permutation(n_views)
+        epoch, pos = divmod(it, len(pool))
+        order = pool[np.random.default_rng((cfg.seed, epoch)).permutation(len(pool))]
         factor = cfg.downscale_at(it)
         if not log["downscale"] or log["downscale"][-1]["factor"] != factor:
             log["downscale"].append({"iteration": it, "factor": factor})

@@ -12,7 +12,7 @@ from symdrive_core.eval.views import evaluate_heldout, recorded_renderer
 from symdrive_core.gaussians import Gaussians
 from symdrive_core.metrics import psnr
 from symdrive_core.optim import decompose
-from symdrive_core.optim.reconstruct import ReconstructConfig, reconstruct
+from symdrive_core.optim.reconstruct import Part, ReconstructConfig, reconstruct, view_pool
 from symdrive_core.scene import Pose, load_manifest
 from symdrive_core.scene.camera import CameraView
 from symdrive_core.splat.render import render_scene
@@ -251,3 +251,70 @@ def test_the_coverage_cost_reaches_the_fit_from_the_command_line(tmp_path, comma
         with pytest.raises(SystemExit) as exit_:
             main(["reconstruct", str(root), "--vehicle-alpha-weight", bad])
         assert exit_.value.code == 2
+
+
+def _part(name: str, poses) -> Part:
+    return Part(name, {}, None, None, 1.0, None, None, poses=poses)
+
+
+def test_views_of_a_driving_vehicle_come_as_often_as_configured(moving_box):
+    """``driving_view_repeat``: one pass over the views holds each view once, and each view whose
+    frame shows a vehicle that drives that many times; a parked vehicle repeats nothing, and a box
+    that moves less than ``driving_m`` is parked."""
+    from symdrive_core.optim.views import load_views
+
+    root, *_ = moving_box
+    m = load_manifest(root)
+    views = load_views(m, list(range(len(m.frames))), depth=False)
+    (track,) = decompose.tracks(m)
+    n = len(track.poses)
+    seen = [p if 5 <= f <= 8 else None for f, p in enumerate(track.poses)]  # drives 2.7 m while seen
+    parts = [_part("background", None), _part("car", seen), _part("parked", [track.poses[0]] * n)]
+    for repeat in (1, 2, 3):
+        counts = np.bincount(view_pool(views, parts, ReconstructConfig(driving_view_repeat=repeat)), minlength=len(views))
+        assert counts.tolist() == [repeat if 5 <= v.frame <= 8 else 1 for v in views], repeat
+    slow = ReconstructConfig(driving_view_repeat=2, driving_m=3.0)
+    assert view_pool(views, parts, slow).tolist() == list(range(len(views)))
+
+
+def test_a_fit_draws_each_pass_from_the_pool(moving_box, tmp_path, monkeypatch):
+    """The training loop renders one pass's views as :func:`view_pool` lists them: with
+    ``driving_view_repeat`` 2 and the box seen at frames 4 to 9 only, a pass renders those training
+    views twice and the others once."""
+    from symdrive_core.optim import reconstruct as fitting
+    from symdrive_core.scene.ground_truth import split_frames
+
+    root, *_ = moving_box
+    m = load_manifest(root)
+    (box,) = m.actors
+    box.poses = [p if 4 <= f <= 9 else None for f, p in enumerate(box.poses)]
+    box.recorded_poses = None
+    train = split_frames(m)[0]
+    expected = sorted(train + [f for f in train if 4 <= f <= 9])
+    rendered = []
+    render = fitting.render_parts
+
+    def recording(parts, view, *args, **kwargs):
+        rendered.append(view.frame)
+        return render(parts, view, *args, **kwargs)
+
+    monkeypatch.setattr(fitting, "render_parts", recording)
+    cfg = ReconstructConfig(iters=len(expected), densify_from=10_000, sky_points=0, checkpoint_every=10_000,
+                            sh_degree=0, driving_view_repeat=2)
+    reconstruct(m, tmp_path / "fit", cfg, progress=False)
+    assert sorted(rendered) == expected and len(expected) > len(train)
+
+
+def test_the_driving_views_repeat_reaches_the_fit_from_the_command_line(tmp_path, command_config):
+    """``--driving-view-repeat`` sets the config's count (once, the default, when not given); a count
+    below 1 is refused before any fitting."""
+    from symdrive_core.cli import main
+    from tests.optim.moving_box import write_moving_box
+
+    root, *_ = write_moving_box(tmp_path / "pkg")
+    seen = [command_config([str(root), "--quiet", *extra]).driving_view_repeat
+            for extra in ([], ["--driving-view-repeat", "2"])]
+    assert seen == [ReconstructConfig().driving_view_repeat, 2] and seen[0] == 1
+    with pytest.raises(SystemExit) as exit_:
+        main(["reconstruct", str(root), "--driving-view-repeat", "0"])
+    assert exit_.value.code == 2
