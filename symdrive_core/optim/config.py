@@ -142,8 +142,8 @@ class ReconstructConfig:
     vehicle_alpha_weight: float = 0.0
     # Views that show a recorded vehicle driving (its box's centre moves more than ``driving_m`` over
     # the drive) come this many times in each pass over the views: its Gaussians learn from those
-    # views only. 1 (off, the default): 2 lifted a real drive's driving car by 0.9 dB on average
-    # over three seeds but cost its whole held-out drive 0.22 dB (the other frames' share of the
+    # views only. 1 (off, the default): 2 lifted a real drive's driving car by 0.97 dB on average
+    # over four seeds but cost its whole held-out drive 0.23 dB (the other frames' share of the
     # iterations fell), and a static fit given the same frames twice gained 0.8 dB there too
     # (docs/results.md).
     driving_view_repeat: int = 1
