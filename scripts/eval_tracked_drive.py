@@ -32,16 +32,10 @@ from pathlib import Path
 
 def moving_tracks(manifest, moving_m: float) -> list[str]:
     """Recorded vehicles whose box centre moves more than ``moving_m`` metres over their frames."""
-    import numpy as np
+    from symdrive_core.scene.poses import travels
 
-    ids = []
-    for a in manifest.actors:
-        if a.kind != "existing" or a.wlh is None:
-            continue
-        centres = np.array([p.translation for f in range(len(a.poses)) if (p := a.recorded_pose(f)) is not None])
-        if len(centres) > 1 and np.linalg.norm(centres.max(0) - centres.min(0)) > moving_m:
-            ids.append(a.id)
-    return ids
+    return [a.id for a in manifest.actors if a.kind == "existing" and a.wlh is not None
+            and travels([a.recorded_pose(f) for f in range(len(a.poses))], moving_m)]
 
 
 def label_masks(labels: Path, ids: list[str], shape: tuple[int, int], label_size: tuple[int, int],

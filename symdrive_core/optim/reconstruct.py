@@ -34,6 +34,7 @@ from ..io.points import read_points
 from ..scene import Manifest
 from ..scene.depth import measured
 from ..scene.ground_truth import split_frames
+from ..scene.poses import travels
 from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
 from . import decompose, pose_refine
@@ -308,18 +309,10 @@ def render_parts(parts: list[Part], view: View, degree: int, render_depth: bool,
     return out["rgb"], out["alpha"], out["info"], present
 
 
-def driving(part: Part, min_move_m: float) -> bool:
-    """Whether ``part`` is a recorded vehicle whose box's centre moves more than ``min_move_m``."""
-    if part.poses is None:
-        return False
-    centres = np.array([p.translation for p in part.poses if p is not None])
-    return len(centres) > 1 and float(np.linalg.norm(centres.max(0) - centres.min(0))) > min_move_m
-
-
 def view_pool(views: list[View], parts: list[Part], cfg: ReconstructConfig) -> np.ndarray:
     """One pass over the views, as indices into ``views``: each once, and those showing a driving
     vehicle ``cfg.driving_view_repeat`` times in all (each pass is shuffled)."""
-    movers = [p for p in parts if driving(p, cfg.driving_m)]
+    movers = [p for p in parts if p.poses is not None and travels(p.poses, cfg.driving_m)]
     repeated = [i for i, v in enumerate(views) if any(m.present(v.frame) for m in movers)]
     return np.array(list(range(len(views))) + repeated * (cfg.driving_view_repeat - 1), dtype=np.int64)
 

@@ -78,3 +78,10 @@ def yaw_of(rotation) -> float:
     """Heading angle about world Z of a rotation's forward (+X) axis."""
     fwd = quat_to_matrix(rotation)[:, 0]
     return float(np.arctan2(fwd[1], fwd[0]))
+
+
+def travels(poses: list[Pose | None], metres: float) -> bool:
+    """Whether the centres of ``poses`` (None: not seen) span more than ``metres``: a vehicle that
+    drives, not one parked whose boxes only jitter."""
+    centres = np.array([p.translation for p in poses if p is not None])
+    return len(centres) > 1 and float(np.linalg.norm(centres.max(0) - centres.min(0))) > metres
