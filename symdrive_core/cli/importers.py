@@ -246,15 +246,28 @@ def _start_points(src, opt, args) -> None:
     fields = given(args, "triangulate_beyond_lidar") if hasattr(args, "triangulate_beyond_lidar") else {}
     start_points(src, opt.out, opt.heldout_every, replace(StartPointsConfig(), **fields),
                  log=lambda line: print(line, flush=True))
-    if src.points is None and src.splats is None and not (opt.up is not None and opt.camera_height is not None):
+    if src.splats is not None or (src.points is not None and len(src.points)):
+        return
+    placed = opt.up is not None and opt.camera_height is not None
+    if src.points is None and not placed:
         raise InputError(src.path, "no points, and no images to triangulate them from: pass --images DIR, or "
                          "--up x,y,z and --camera-height H to place the ground below the cameras", "points")
+    if src.points is not None and not placed:
+        raise InputError(src.path, "no points triangulated from the images (too little overlap or texture between "
+                         "the frames): pass --up x,y,z and --camera-height H to place the ground below the cameras",
+                         "points")
+    print("warning: the package has no points: 'symdrive reconstruct' has nothing to start from (give the source "
+          "splats, a point cloud or LiDAR scans)", file=sys.stderr)
 
 
 def _finish(src, args, t0, copy_images: bool = False, options=None, extend=None, report=None) -> int:
     from ..importers.package import write_package
 
     opt = options or _options(args, copy_images)
+    if left_out := [v.name for v in src.grouped.left_out]:
+        src.notes["images_left_out"] = left_out
+        print(f"warning: {len(left_out)} image(s) left out, of frames not every camera recorded: "
+              f"{', '.join(left_out[:5])}{', ...' if len(left_out) > 5 else ''}", file=sys.stderr)
     _start_points(src, opt, args)
     info = write_package(src, opt, progress=not args.quiet, extend=extend)
     print(f"{info['package']}: {info['frames']} frames, cameras {', '.join(info['cameras'])}, "

@@ -28,8 +28,11 @@ def finite_numbers(text: str, count: int | tuple[int, ...], path: Path, where: s
         v = np.array([float(x) for x in text.replace(",", " ").split()], dtype=np.float64)
     except ValueError:
         raise InputError(path, f"expected {expected} numbers", where) from None
-    if len(v) not in counts or not np.isfinite(v).all():
-        raise InputError(path, f"expected {expected} finite numbers, got {len(v)}", where)
+    if len(v) not in counts:
+        raise InputError(path, f"expected {expected} numbers, got {len(v)}", where)
+    if not np.isfinite(v).all():
+        raise InputError(path, f"number {int(np.flatnonzero(~np.isfinite(v))[0]) + 1} is {v[~np.isfinite(v)][0]}, "
+                         "not a finite number", where)
     return v
 
 
@@ -65,4 +68,4 @@ def read_small_text(path: Path, field: str, limit: int = 1 << 20) -> str:
 
     if check_regular(path, field).st_size > limit:
         raise InputError(path, f"larger than {limit >> 20} MB: not a calibration file", field)
-    return Path(path).read_text(encoding="utf-8", errors="replace")
+    return Path(path).read_text(encoding="utf-8-sig", errors="replace")

@@ -9,13 +9,16 @@ in the source frame). :func:`group_views` groups them into package cameras and f
 * a frame is an instant the rig recorded: the rest of the image name in the folder layout, the
   n-th image by name of each camera otherwise;
 * frames are ordered by timestamp when every view has one, else by image name (numbers inside
-  names compare as numbers, so ``img10`` follows ``img9``).
+  names compare as numbers, so ``img10`` follows ``img9``), and then timed by their numbers at
+  ``fps`` (frames 0, 1, 3 at 10 fps: 0, 0.1, 0.3 s, so a gap stays a gap);
+* a frame not every camera recorded is left out, and its images listed (``Grouped.left_out``)
+  for the import to say so.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -48,10 +51,23 @@ class Grouped:
     frame_keys: list[str]
     table: list[list[View]]  # [camera][frame]
     timestamps: list[float]
+    left_out: list[View] = field(default_factory=list)  # images of frames not every camera recorded
 
 
 def natural_key(text: str):
     return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", text) if t]
+
+
+def frame_times(keys: list[str], fps: float) -> list[float]:
+    """Seconds of frames ``keys`` (in time order) without recorded times: each key's last number
+    over ``fps`` from the first's, when those numbers increase along the keys, else one frame
+    period apart."""
+    numbers = [re.findall(r"\d+", k) for k in keys]
+    if all(numbers):
+        n = [int(x[-1]) for x in numbers]
+        if all(b > a for a, b in zip(n, n[1:])):
+            return [(i - n[0]) / fps for i in n]
+    return [i / fps for i in range(len(keys))]
 
 
 def check_views(views: list[View]) -> None:
@@ -125,13 +141,17 @@ def group_views(views: list[View], *, camera_name: str = DEFAULT_CAMERA, fps: fl
         t = {k: min(by_cam[c][k].timestamp for c in cameras) for k in keys}
         order = sorted(keys, key=lambda k: (t[k], natural_key(k)))
         times = [float(t[k]) for k in order]
-        if any(b <= a for a, b in zip(times, times[1:])):
-            times = [i / fps for i in range(len(order))]
+        for a, b in zip(order, order[1:]):
+            if t[b] <= t[a]:
+                v = min((by_cam[c][b] for c in cameras), key=lambda v: v.timestamp)
+                raise InputError(v.source, f"frame {b} has the time of frame {a} ({t[a]:.6f} s): two frames cannot "
+                                 "share an instant", v.where)
     else:
         order = sorted(keys, key=natural_key)
-        times = [i / fps for i in range(len(order))]
+        times = frame_times(order, fps)
     table = [[by_cam[c][k] for k in order] for c in cameras]
-    return Grouped(cameras, order, table, times)
+    left_out = sorted((v for c in cameras for k, v in by_cam[c].items() if k not in keys), key=lambda v: natural_key(v.name))
+    return Grouped(cameras, order, table, times, left_out)
 
 
 def split_heldout(n_frames: int, every: int | None) -> tuple[list[int], list[int]]:

@@ -31,7 +31,7 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".exr", ".
 def read_cfg_args(path: Path) -> dict:
     """Keyword arguments of the ``Namespace(...)`` repr in ``cfg_args`` (literals only)."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
         node = ast.parse(text.strip(), mode="eval").body
     except (OSError, UnicodeDecodeError, SyntaxError, ValueError):
         raise InputError(path, "not a Namespace(...) of the 3DGS trainer's arguments", "cfg_args") from None
@@ -82,7 +82,7 @@ def read_views(model: str | Path, images: str | Path | None) -> list[View]:
     if not cams_path.is_file():
         raise InputError(cams_path, "file not found (expected the 3DGS trainer's output folder)", "cameras.json")
     try:
-        cams = json.loads(cams_path.read_text(encoding="utf-8"))
+        cams = json.loads(cams_path.read_text(encoding="utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(cams_path, f"not valid JSON: {exc}") from None
     if not isinstance(cams, list):

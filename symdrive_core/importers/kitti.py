@@ -38,7 +38,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 def _read_lines(path: Path, what: str) -> list[str]:
     try:
-        return [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+        return [line for line in path.read_text(encoding="utf-8-sig").splitlines() if line.strip()]
     except FileNotFoundError:
         raise InputError(path, "file not found", what) from None
     except (UnicodeDecodeError, IsADirectoryError) as exc:
@@ -95,9 +95,15 @@ def _frames(folder: Path) -> dict[int, Path]:
 
 
 def _times(path: Path) -> list[float] | None:
+    """Seconds of frame n at line n + 1 of ``times.txt`` (None without one); each after the one before."""
     if not path.is_file():
         return None
-    return [float(finite_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
+    times = [float(finite_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
+    for i in range(1, len(times)):
+        if times[i] <= times[i - 1]:
+            raise InputError(path, f"frame {i}'s time {times[i]:g} s is not after frame {i - 1}'s ({times[i - 1]:g} s)",
+                             f"line {i + 1}")
+    return times
 
 
 def read_kitti(sequence: str | Path, poses: str | Path | None = None, *, splats: str | Path | None = None,

@@ -73,7 +73,7 @@ def frame_clocks(path: Path, names: list[str]) -> tuple[list[tuple[int, float]],
     ``timestamps.txt`` (line n: frame n), or None when the sensor has none."""
     if not path.is_file():
         return None
-    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    lines = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()
     clocks = []
     for name in names:
         n = int(name)

@@ -4,7 +4,7 @@ A recorded drive's LiDAR is the depth a reconstruction and the geometry-guided w
 but it measures a few pixels of each image, not all of them. One scan per package frame (in
 name order, numbers compared as numbers): KITTI's ``velodyne`` ``.bin`` (float32 x, y, z,
 reflectance), nuScenes' ``.pcd.bin`` (float32 x, y, z, intensity, ring), an ``.npz`` whose
-``points`` array is [N, >= 3], or a PLY with x, y, z. Points move into the camera by the rig's
+``points`` array is [N, 3 to 16], or a PLY with x, y, z. Points move into the camera by the rig's
 fixed sensor-to-camera transform (:func:`write_depth` also takes one per frame, for a LiDAR and a
 camera that record at different times on a moving vehicle) and are projected with each frame's
 K; a pixel keeps its nearest point (a z-buffer: a return through a gap behind a pole is hidden by
@@ -30,6 +30,7 @@ from .kitti_calib import CAMERAS, REFERENCE_CAMERA, labels_of, layout_of, velo_t
 
 SCAN_SUFFIXES = (".bin", ".npz", ".ply")
 DEPTH_FOLDER = "lidar_depth"
+MAX_POINT_FIELDS = 16  # values per point in an .npz scan (x, y, z, intensity, ring, time, ...): more is a transpose
 MAX_SCAN_BYTES = 1 << 30  # a 128-beam scan is tens of MB; this stops a hostile file, not a real one
 
 
@@ -81,8 +82,10 @@ def _npz_points(path: Path) -> np.ndarray:
             points = z["points"]
     except (ValueError, OSError, zipfile.BadZipFile) as exc:
         raise InputError(path, f"not a readable .npz: {exc}", "points") from None
-    if points.ndim != 2 or points.shape[1] < 3 or points.dtype.kind not in "fiu":
-        raise InputError(path, f"expected numbers [N, 3 or more], got {points.dtype} {list(points.shape)}", "points")
+    if points.ndim != 2 or not 3 <= points.shape[1] <= MAX_POINT_FIELDS or points.dtype.kind not in "fiu":
+        transposed = points.ndim == 2 and points.shape[0] >= 3 and points.shape[1] > MAX_POINT_FIELDS
+        raise InputError(path, f"expected numbers [N, 3 to {MAX_POINT_FIELDS}] (a row per point), got {points.dtype} "
+                         f"{list(points.shape)}" + (" (a column per point? transpose it)" if transposed else ""), "points")
     return points[:, :3]
 
 

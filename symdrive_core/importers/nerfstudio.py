@@ -74,7 +74,7 @@ def read_views(transforms: str | Path, *, undistort: bool = False) -> tuple[Path
     if path.is_dir():
         path = path / "transforms.json"
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise InputError(path, "file not found", "transforms.json") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -38,6 +38,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
+from ..scene.manifest import WLH_MAX
 from .frames import View, group_views
 from .lidar import LidarConfig, seen_returns
 from .nuscenes_tables import Table, Tables
@@ -200,7 +201,7 @@ def _tracks(tables: Tables, frames: dict[str, int], categories: tuple[str, ...])
     kinds: dict[str, str] = {}
     skipped: dict[str, int] = {}
     for token in ann.records:
-        sample = ann.text(token, "sample_token")
+        sample, _ = tables.follow(ann, token, "sample_token", "sample")  # of this scene or another
         if sample not in frames:
             continue
         instance, name = _category(tables, token)
@@ -208,13 +209,16 @@ def _tracks(tables: Tables, frames: dict[str, int], categories: tuple[str, ...])
             skipped[name] = skipped.get(name, 0) + 1
             continue
         wlh = ann.numbers(token, "size", (3,), "3 numbers (w, l, h in metres)")
+        if not ((wlh > 0) & (wlh <= WLH_MAX)).all():
+            ann.fail(token, "size", f"w, l, h must lie in (0, {WLH_MAX:g}] metres, got {', '.join(f'{x:g}' for x in wlh)}")
         centre = ann.numbers(token, "translation", (3,), "3 numbers (x, y, z in metres)")
         box = Box(frames[sample], centre, ann.rotation(token), f"[{token}]")
         boxes.setdefault(instance, []).append((token, box, wlh))
         kinds[instance] = name.rsplit(".", 1)[-1]
-    tracks, instances = [], {}
-    for i, (instance, rows) in enumerate(boxes.items()):
+    for rows in boxes.values():
         rows.sort(key=lambda r: r[1].frame)
+    tracks, instances = [], {}
+    for i, (instance, rows) in enumerate(sorted(boxes.items(), key=lambda item: item[1][0][1].frame)):
         first = rows[0][0]
         actor = f"{kinds[instance]}_{i}"
         instances[actor] = instance

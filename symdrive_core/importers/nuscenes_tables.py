@@ -77,9 +77,11 @@ class Table:
                 a = np.array(v, dtype=np.float64)
             except (ValueError, OverflowError):  # ragged lists, integers beyond a float
                 pass
-        if a.shape != shape or not np.isfinite(a).all():
+        if a.shape != shape:
             got = f"{len(v)} values" if isinstance(v, list) else repr(v)
             self.fail(token, key, f"expected {what}, got {got}")
+        if not np.isfinite(a).all():
+            self.fail(token, key, f"expected {what}, got {a[~np.isfinite(a)][0]}")
         return a
 
     def rotation(self, token: str, key: str = "rotation") -> np.ndarray:
@@ -136,7 +138,7 @@ def _read(path: Path, name: str) -> Table:
     with open_regular(path, name) as f:
         raw = f.read()
     try:
-        data = json.loads(raw.decode("utf-8"))
+        data = json.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text (byte {exc.start})", name) from None
     except json.JSONDecodeError as exc:

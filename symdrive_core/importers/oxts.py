@@ -42,7 +42,7 @@ def read_record(path: Path) -> np.ndarray:
     if check_regular(path, "oxts").st_size > RECORD_BYTES_MAX:
         raise InputError(path, f"larger than {RECORD_BYTES_MAX} bytes: not an OXTS record", "oxts")
     try:
-        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+        lines = [line for line in path.read_text(encoding="utf-8-sig").splitlines() if line.strip()]
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text (byte {exc.start})", "line 1") from None
     if len(lines) != 1:

@@ -85,7 +85,7 @@ def split_rig(grouped: Grouped, second: str, tol: RigTolerance = RigTolerance())
         raise InputError("--lateral-truth", f"the source has only camera {second!r}; a rig needs a second one")
     i = grouped.cameras.index(second)
     rest = Grouped([c for j, c in enumerate(grouped.cameras) if j != i], grouped.frame_keys,
-                   [row for j, row in enumerate(grouped.table) if j != i], grouped.timestamps)
+                   [row for j, row in enumerate(grouped.table) if j != i], grouped.timestamps, grouped.left_out)
     first, views = rest.table[0], grouped.table[i]
     if any(v.image is None for v in views):
         raise InputError("--lateral-truth", "the lateral truth is the second camera's images: pass --images DIR")

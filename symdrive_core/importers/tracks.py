@@ -207,7 +207,7 @@ def _load_json(path: Path):
     if len(raw) > TRACKS_BYTES_MAX:
         raise InputError(path, f"larger than {TRACKS_BYTES_MAX} bytes: not a tracks file")
     try:
-        return json.loads(raw.decode("utf-8"))
+        return json.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text (byte {exc.start})") from None
     except json.JSONDecodeError as exc:
@@ -261,7 +261,7 @@ def _read_label_lines(path: Path, types: tuple[str, ...]) -> tuple[dict[int, lis
     if check_regular(path, "TRACKS_FILE").st_size > TRACKS_BYTES_MAX:
         raise InputError(path, f"larger than {TRACKS_BYTES_MAX} bytes: not a label file")
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text (byte {exc.start})") from None
     tracks: dict[int, list[_Label]] = {}
@@ -324,7 +324,7 @@ def read_camera_offset(path: Path) -> np.ndarray:
     path = Path(path)
     if check_regular(path, "--calib").st_size > 1 << 20:
         raise InputError(path, "larger than 1 MB: not a calibration file", "--calib")
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    for line in path.read_text(encoding="utf-8-sig", errors="replace").splitlines():
         label, _, rest = line.strip().partition(" ")
         if label.rstrip(":") == "P2":
             P = finite_numbers(rest, 12, path, "P2").reshape(3, 4)

@@ -67,7 +67,9 @@ def triangulate(grouped: Grouped, near: Path, cfg: TriangulateConfig = DEFAULT,
     near.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{near.name}.triangulate.", suffix=".part", dir=near.parent))
     level = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = int(pycolmap.logging.Level.WARNING)  # per-image progress is noise here
+    # per-image progress and bundle adjustment's warnings (a gauge it cannot fix when nothing
+    # matched) are noise here: the import says how many points came and how well they fit
+    pycolmap.logging.minloglevel = int(pycolmap.logging.Level.ERROR)
     try:
         names = _layout(grouped, tmp / "images", list(range(len(grouped.frame_keys))) if frames is None else frames)
         db = tmp / "database.db"

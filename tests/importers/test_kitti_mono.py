@@ -251,6 +251,31 @@ def test_a_bad_calibration_names_the_file_and_field_and_writes_nothing(mono, lay
     assert (work / "manifest.json").read_text() == before and not (work / "lidar_depth").exists()
 
 
+def test_a_gap_in_the_frames_stays_a_gap_in_time(tmp_path, capsys):
+    seq = write_sequence(tmp_path / "seq")
+    (seq / "image_2" / "000002.png").unlink()
+    m, _ = import_sequence(seq, tmp_path / "pkg", capsys)
+    assert [f.timestamp for f in m.frames] == pytest.approx([0.0, 0.1, 0.3, 0.4, 0.5])
+
+
+def test_text_files_saved_with_a_byte_order_mark_read_as_without(tmp_path, capsys):
+    seq = write_sequence(tmp_path / "seq")
+    for name in ("calib.txt", "poses.txt"):
+        (seq / name).write_bytes(b"\xef\xbb\xbf" + (seq / name).read_bytes())
+    m, _ = import_sequence(seq, tmp_path / "pkg", capsys)
+    plain, _ = import_sequence(write_sequence(tmp_path / "plain"), tmp_path / "plain_pkg", capsys)
+    np.testing.assert_array_equal(m.cameras[0].frames[4].camera_to_world, plain.cameras[0].frames[4].camera_to_world)
+
+
+def test_times_that_do_not_increase_are_refused_naming_the_line(tmp_path, capsys):
+    seq = write_sequence(tmp_path / "seq")
+    (seq / "times.txt").write_text("0.0\n0.1\n0.2\n0.2\n0.4\n0.5\n")
+    out = tmp_path / "pkg"
+    rc = main(["import", "kitti", str(seq), "--splats", str(seq / "splats.ply"), "--out", str(out),
+               "--camera-height", "1.6"])
+    assert_refused(rc, capsys.readouterr().err.strip(), out, "times.txt: line 4: frame 3's time 0.2 s is not after")
+
+
 def test_no_image_folder_is_refused_naming_the_sequence(tmp_path, capsys):
     seq = write_sequence(tmp_path / "seq")
     (seq / "image_2").rename(seq / "images")

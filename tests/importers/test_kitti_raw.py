@@ -348,7 +348,7 @@ def test_calibration_with_the_wrong_field_count(bad, tmp_path, capsys, file, key
     path = bad.parent / file
     lines = [f"{line} 1.0" if line.startswith(f"{key}:") else line for line in path.read_text().splitlines()]
     path.write_text("\n".join(lines) + "\n")
-    refused(bad, tmp_path, capsys, file, f": {key}: ", "finite numbers, got")
+    refused(bad, tmp_path, capsys, file, f": {key}: ", "numbers, got")
 
 
 def test_scan_count_not_the_image_count(bad, tmp_path, capsys):

@@ -12,6 +12,7 @@ import pytest
 
 from symdrive_core import conventions
 from symdrive_core.cli import main
+from symdrive_core.errors import InputError
 from symdrive_core.importers.lidar import read_scan, read_sensor_to_camera, sparse_depth
 from symdrive_core.io.images import read_image
 from symdrive_core.io.points import write_points
@@ -136,6 +137,14 @@ def test_z_buffer_keeps_the_nearest_return_and_drops_what_is_too_near():
                     [-0.5, -0.4, 1.0]])  # u = 4 - 5 = -1: left of the image
     d = sparse_depth(pts, np.eye(4), K, 8, 6, min_depth_m=0.5)
     assert d[3, 4] == 3.0 and np.count_nonzero(d) == 1
+
+
+def test_a_transposed_npz_scan_is_refused_saying_so(tmp_path):
+    np.savez(tmp_path / "a.npz", points=np.zeros((3, 300), np.float32))
+    with pytest.raises(InputError, match=r"a.npz: points: expected numbers \[N, 3 to 16\].*\[3, 300\].*transpose"):
+        read_scan(tmp_path / "a.npz")
+    np.savez(tmp_path / "b.npz", points=np.ones((300, 5), np.float32))  # x, y, z and two more: fine
+    assert read_scan(tmp_path / "b.npz").shape == (300, 3)
 
 
 def test_scans_drop_non_finite_points(tmp_path):

@@ -76,3 +76,23 @@ def test_poses_only_without_images_up_and_camera_height_place_the_ground(tmp_pat
     assert main([*args[:-2], "--force"]) == 2  # no points, no images, no --camera-height: nothing to place it by
     err = capsys.readouterr().err
     assert "--up" in err and len(err.strip().splitlines()) == 1
+
+
+def test_images_that_triangulate_to_no_points_are_refused_unless_the_ground_is_placed(tmp_path, capsys):
+    """Featureless images: triangulation finds nothing, so nothing places the ground (exit 2,
+    one line) unless --up and --camera-height do, and then the package is said to have no points."""
+    from symdrive_core.io.images import write_image
+
+    world, _ = curved_world(tmp_path, seed=2)
+    model = write_colmap(world, tmp_path / "sparse", with_points=False)
+    for name in world.names:  # new files: the world's images are links to the demo's
+        write_image(tmp_path / "images" / name, np.full((world.height, world.width, 3), 0.5, np.float32))
+    out = tmp_path / "pkg"
+    args = ["import", "colmap", str(model), "--images", str(tmp_path / "images"), "--out", str(out), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "points: no points triangulated from the images" in err, err
+    assert not out.exists()
+    up = world.S[:3, :3] @ [0.0, 0.0, 1.0]
+    assert main([*args, "--camera-height", str(CAMERA_HEIGHT), "--up=" + ",".join(f"{v:.12g}" for v in up)]) == 0
+    assert "warning: the package has no points" in capsys.readouterr().err

@@ -371,6 +371,40 @@ def test_a_token_that_points_nowhere(bad, tmp_path, capsys):
             "points nowhere", "ego_pose.json")
 
 
+def test_an_annotation_of_a_sample_that_is_nowhere(bad, tmp_path, capsys):
+    edit(bad, "sample_annotation", token("ann", "car", 2), sample_token="0" * 32)
+    refused(bad, tmp_path, capsys, "sample_annotation.json", f"[{token('ann', 'car', 2)}].sample_token",
+            "points nowhere", "sample.json")
+
+
+@pytest.mark.parametrize("size", [[-1.9, 4.6, 1.5], [1.9, 4.6e6, 1.5], [1.9, 0.0, 1.5]])
+def test_one_box_of_a_size_no_vehicle_has(bad, tmp_path, capsys, size):
+    edit(bad, "sample_annotation", token("ann", "car", 2), size=size)
+    refused(bad, tmp_path, capsys, "sample_annotation.json", f"[{token('ann', 'car', 2)}].size",
+            "w, l, h must lie in (0, ")
+
+
+def test_a_number_that_is_not_finite_is_named(bad, tmp_path, capsys):
+    edit(bad, "ego_pose", token("ego", "CAM_FRONT", 1), translation=[float("nan"), 0.0, 0.0])
+    refused(bad, tmp_path, capsys, "ego_pose.json", f"[{token('ego', 'CAM_FRONT', 1)}].translation",
+            "expected 3 numbers (x, y, z in metres), got nan")
+
+
+def test_vehicles_are_named_in_order_of_first_appearance(tmp_path):
+    root = write_dataset(tmp_path / "dataroot")
+    anns, instances = read_table(root, "sample_annotation"), read_table(root, "instance")
+    late = {**anns[1], "token": token("ann", "late"), "instance_token": token("instance", "late"), "prev": "",
+            "next": "", "translation": (np.asarray(anns[1]["translation"]) + [0.0, 4.0, 0.0]).tolist()}
+    instances.append({**instances[0], "token": token("instance", "late"), "nbr_annotations": 1,
+                      "first_annotation_token": late["token"], "last_annotation_token": late["token"]})
+    write_tables(root, {"sample_annotation": [late, *anns], "instance": instances})  # listed first, seen later
+    out = tmp_path / "pkg"
+    assert main(["import", "nuscenes", str(root), "--scene", SCENE, "--cameras", CAMERAS, "--out", str(out),
+                 "--quiet"]) == 0
+    assert load_manifest(out).source["nuscenes"]["instances"] == {"car_0": token("instance", "car"),
+                                                                  "car_1": token("instance", "late")}
+
+
 @pytest.mark.parametrize("name", ["../outside.jpg", "/etc/hostname", "samples/../../outside.jpg"])
 def test_a_file_name_leading_out_of_the_dataroot_is_refused_not_read(bad, tmp_path, capsys, name):
     (bad.parent / "outside.jpg").write_bytes(b"not read")

@@ -368,7 +368,7 @@ def label(**changes) -> str:
 
 @pytest.mark.parametrize("line, says", [
     (label(rest="0 0 -10 1 2 3 4 1.5 1.8 4.5 1.0 1.6 12.0"), "expected 17 or 18 fields"),
-    (label(rest="0 0 -10 1 2 3 4 1.5 1.8 4.5 1.0 nan 12.0 0.1"), "finite numbers"),
+    (label(rest="0 0 -10 1 2 3 4 1.5 1.8 4.5 1.0 nan 12.0 0.1"), "number 12 is nan, not a finite number"),
     (label(rest="0 0 -10 1 2 3 4 1.5 1.8 4.5 1.0 x 12.0 0.1"), "numbers"),
     (label(rest="0 0 -10 1 2 3 4 0 1.8 4.5 1.0 1.6 12.0 0.1"), "h, w, l must lie in (0, 1000]"),
     (label(rest="0 0 -10 1 2 3 4 1.5 1.8 4.5 1.0 1.6 3e7 0.1"), "beyond"),

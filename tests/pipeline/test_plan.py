@@ -142,3 +142,32 @@ def test_sh_degree_of_a_compressed_ply_comes_from_its_sh_element(tmp_path):
     assert sh_degree_of(path) == 0
     write_compressed_ply(path, [BOX], [(0, 0, 0, 0)], sh=np.zeros((1, 24), np.uint8))
     assert sh_degree_of(path) == 2
+
+
+def _recorded_vehicle_without_gaussians(manifest_path, moved_m: float = 0.0):
+    """``manifest_path``'s first actor made a recorded vehicle with no Gaussians of its own
+    (``moved_m``: its last pose moved that far from where the drive saw it)."""
+    d = json.loads(manifest_path.read_text())
+    a = d["actors"][0]
+    a.update(kind="existing", assets={}, recorded_poses=[dict(p) for p in a["poses"]])
+    a["poses"][-1] = {**a["poses"][-1], "translation": [a["poses"][-1]["translation"][0] + moved_m, 2.0, 0.75]}
+    a["recorded_poses"][-1]["translation"] = [a["recorded_poses"][-1]["translation"][0], 2.0, 0.75]
+    manifest_path.write_text(json.dumps(d))
+    return load_manifest(manifest_path)
+
+
+def test_background_splats_draw_an_unedited_recorded_vehicle_without_gaussians(make_package, capsys):
+    path = make_package()
+    plan = make_plan(_recorded_vehicle_without_gaussians(path))
+    reconstruct = plan.stage("reconstruct")
+    assert not reconstruct.run and "they draw 1 recorded vehicle(s) without Gaussians of their own" in reconstruct.reason
+    assert main(["plan", str(path.parent)]) == 0, capsys.readouterr().err
+
+
+def test_an_edited_recorded_vehicle_without_gaussians_stops_the_plan_naming_it(make_package, capsys):
+    path = make_package()
+    _recorded_vehicle_without_gaussians(path, moved_m=3.0)
+    assert main(["plan", str(path.parent)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "actors[0].assets: actor 'car_0' is a recorded vehicle with no Gaussians" \
+        " of its own and is edited" in err, err
