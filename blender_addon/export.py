@@ -9,6 +9,7 @@ sibling directory, re-read and checked by the core, and only then swapped in ato
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import re
 import shutil
@@ -43,16 +44,26 @@ class _Actor:
     splats: str | None  # absolute paths on this machine
     mesh: str | None
     shadow: str | None = None  # a recorded vehicle's learnt shadow layer
-    mesh_in_package: str | None = None  # package-relative GLB written by the export (mesh-only actors)
+    mesh_in_package: str | None = None  # package-relative GLB the export writes of its mesh
 
 
 def _file_label(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "item"
+    """``name`` as a file name: kept where it is one already, else cleaned and marked with a hash
+    of the name, so two names that clean alike ("Cam 1", "Cam_1"; two non-Latin names) never
+    share their files."""
+    label = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
+    if label == name and label not in (".", ".."):
+        return label
+    return f"{label or 'item'}-{hashlib.sha1(name.encode('utf-8')).hexdigest()[:8]}"
 
 
 def export_cameras(scene) -> list[bpy.types.Object]:
+    """The scene's cameras ticked for export; a camera a vehicle's file brought along (a glTF's
+    showcase camera, parented under the vehicle) is part of the vehicle, not a sensor."""
     cams = sorted(
-        (ob for ob in scene.objects if ob.type == "CAMERA" and ob.symdrive.export), key=lambda o: o.name
+        (ob for ob in scene.objects
+         if ob.type == "CAMERA" and ob.symdrive.export and actors.actor_of(ob) is None),
+        key=lambda o: o.name,
     )
     if not cams:
         raise errors.InputError(
@@ -100,11 +111,19 @@ def _collect_actors(scene) -> list[_Actor]:
             if path and not os.path.isfile(path):
                 raise errors.InputError(path, f"asset of actor {s.actor_id!r} not found", "assets")
         out.append(_Actor(root, splats, mesh, shadow=shadow))
-    ids = [a.root.symdrive.instance_id for a in out]
-    if len(set(ids)) != len(ids) or min(ids, default=1) < 1:
-        raise errors.InputError(
-            scene.name, f"actor instance ids must be distinct and >= 1, got {ids}", "instance_id"
-        )
+    seen: dict[int, bpy.types.Object] = {}
+    for a in out:
+        i = a.root.symdrive.instance_id
+        if i < 1:
+            raise errors.InputError(a.root.name, f"instance id {i}: ids are 1 or more", "instance_id")
+        if i in seen:
+            raise errors.InputError(
+                a.root.name,
+                f"instance id {i} is {seen[i].name!r}'s too (a duplicated vehicle?): give each vehicle its own "
+                "in the SymDrive sidebar",
+                "instance_id",
+            )
+        seen[i] = a.root
     return out
 
 
@@ -113,11 +132,12 @@ def _awaits_reconstruction(root: bpy.types.Object) -> bool:
     return root.symdrive.kind == "existing" and min(root.symdrive.wlh) > 0
 
 
-def _sun_direction(scene, bg_inv: Matrix) -> np.ndarray | None:
+def _sun_direction(scene, depsgraph, bg_inv: Matrix) -> np.ndarray | None:
     """Direction sunlight travels (the sun lamp's -Z) in the background frame, if the scene has a sun."""
-    for ob in scene.objects:
-        if ob.type == "LIGHT" and ob.data.type == "SUN" and not ob.hide_render:
-            d = (bg_inv.to_3x3() @ ob.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    for ob in scene.objects:  # a vehicle's own lights (a glTF's) do not light the street
+        if ob.type == "LIGHT" and ob.data.type == "SUN" and not ob.hide_render and actors.actor_of(ob) is None:
+            M = ob.evaluated_get(depsgraph).matrix_world
+            d = (bg_inv.to_3x3() @ M.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
             return np.array(d)
     return None
 
@@ -150,7 +170,7 @@ class _AssetPaths:
                 _carry(Path(path), self.work_dir / inside)
                 self.done[path] = inside.as_posix()
             elif self.copy:
-                target = self.work_dir / "assets" / f"{len(self.done):02d}_{Path(path).name}"
+                target = self._free(Path(path).name)
                 target.parent.mkdir(exist_ok=True)
                 shutil.copy2(path, target)
                 self.done[path] = target.relative_to(self.work_dir).as_posix()
@@ -160,6 +180,16 @@ class _AssetPaths:
                 except ValueError:  # another drive: keep it absolute
                     self.done[path] = Path(path).as_posix()
         return self.done[path]
+
+    def _free(self, name: str) -> Path:
+        """``assets/NN_name`` under the new package, a name neither it nor the package it replaces
+        has (whose files may be carried there, and may be linked to the files of that package)."""
+        n = len(self.done)
+        while True:
+            rel = Path("assets") / f"{n:02d}_{name}"
+            if not (self.work_dir / rel).exists() and not (self.final_dir / rel).exists():
+                return self.work_dir / rel
+            n += 1
 
 
 def _inside(path: str, folder: Path) -> Path | None:
@@ -194,9 +224,34 @@ def _package_dir(options: ExportOptions) -> Path:
     return out
 
 
+def _check_still(scene, depsgraph, bg_inv: Matrix) -> None:
+    """The background splat object stays where it was: every pose is exported in its frame, so
+    one that moves (keyframes, a constraint, a driver) would make them disagree frame to frame."""
+    bg = scene.symdrive.background
+    if bg is None or bg.name not in scene.objects:
+        return
+    drift = np.abs(np.array(bg_inv @ bg.evaluated_get(depsgraph).matrix_world) - np.eye(4)).max()
+    if drift > 1e-6:
+        raise errors.InputError(bg.name, f"the background object moves (at frame {scene.frame_current}): every pose "
+                                "is exported in its frame, so it must stay still; move the cameras and vehicles "
+                                "instead", "matrix_world")
+
+
+def _depsgraph(scene):
+    """The evaluated state of ``scene`` itself, which need not be the window's scene (``headless
+    --scene``): its first view layer's, as ``frame_set`` updated it."""
+    if bpy.context.scene == scene:
+        return bpy.context.evaluated_depsgraph_get()
+    return scene.view_layers[0].depsgraph
+
+
 def _camera_frame(scene, depsgraph, cam, bg_inv: Matrix, width: int, height: int) -> scene_pkg.CameraFrame:
-    """A camera's scale does not change what it sees: it is dropped, the rotation re-orthonormalised."""
+    """A camera's scale does not change what it sees: it is dropped, the rotation re-orthonormalised.
+    A mirrored camera (a negative scale) sees the mirror image, which no pose can say: refused."""
     ev = cam.evaluated_get(depsgraph)
+    if ev.matrix_world.to_3x3().determinant() < 0:
+        raise errors.InputError(cam.name, f"mirrored by a negative scale at frame {scene.frame_current}: a camera's "
+                                "image cannot be mirrored", "scale")
     c2w = conventions.blender_camera_to_opencv(reference_frame.rigid(bg_inv @ ev.matrix_world))
     return scene_pkg.CameraFrame(
         camera_intrinsics(scene, ev.data, width, height), c2w, conventions.invert_rigid(c2w)
@@ -219,7 +274,6 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
     frame_numbers = _frame_range(scene, options)
     cameras = export_cameras(scene)
     actor_list = _collect_actors(scene)
-    bg_inv = reference_frame.background_matrix(scene).inverted()
     offsets = camera_math.parse_offsets(scene.symdrive.lateral_offsets)
     width, height = render_size(scene)
     out = _package_dir(options)
@@ -234,11 +288,16 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
     )
     original_frame = scene.frame_current
     try:
+        scene.frame_set(frame_numbers[0])  # poses are in the background's frame where the export starts
+        depsgraph = _depsgraph(scene)
+        bg_inv = reference_frame.background_matrix(scene, depsgraph).inverted()
+        sun = _sun_direction(scene, depsgraph, bg_inv)
         with atomic.atomic_directory(out) as work:
             with renderer or contextlib.nullcontext():
                 for i, f in enumerate(frame_numbers):
                     scene.frame_set(f)
-                    depsgraph = bpy.context.evaluated_depsgraph_get()
+                    depsgraph = _depsgraph(scene)
+                    _check_still(scene, depsgraph, bg_inv)
                     for cam in cameras:
                         cam_frames[cam].append(_camera_frame(scene, depsgraph, cam, bg_inv, width, height))
                     for a in actor_list:
@@ -250,10 +309,9 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                         progress(i + 1, len(frame_numbers))
             asset = _AssetPaths(out, work, options.copy_assets)
             for a in actor_list:
-                if a.splats is None and a.mesh is not None:  # mesh-only: the geometry as Blender shows it
+                if a.mesh is not None:  # the geometry as Blender shows it, in the actor's frame
                     a.mesh_in_package = write_actor_glb(a.root, work)
             inserted = any(a.root.symdrive.kind == "inserted" for a in actor_list)
-            sun = _sun_direction(scene, bg_inv)
             fps = scene.render.fps / scene.render.fps_base
             manifest = scene_pkg.Manifest(
                 name=options.name or scene.symdrive.package_name or scene.name,
@@ -342,7 +400,7 @@ def _write_masks(work: Path, renderer, depsgraph, cameras, present, index, mask_
 
 
 def write_actor_glb(root: bpy.types.Object, work: Path) -> str:
-    """Write a mesh-only actor's geometry as ``assets/<actor id>/mesh.glb`` and return that path.
+    """Write an actor's mesh geometry as ``assets/<actor id>/mesh.glb`` and return that path.
 
     Blender's own glTF exporter writes the meshes (modifiers applied, materials and their base
     colour included) in the actor's asset frame: X forward, Z up, origin at the actor's origin

@@ -9,8 +9,9 @@ from mathutils import Matrix
 from .core import errors
 
 
-def background_matrix(scene: bpy.types.Scene) -> Matrix:
-    """World matrix of the background splat object (identity when there is none).
+def background_matrix(scene: bpy.types.Scene, depsgraph=None) -> Matrix:
+    """World matrix of the background splat object (identity when there is none), as ``depsgraph``
+    evaluates it where given (a scene other than the window's has no other up-to-date one).
 
     It must be rigid: the backend renders the background PLY unscaled, so a scaled background
     object would make every exported pose disagree with what the artist sees.
@@ -18,7 +19,7 @@ def background_matrix(scene: bpy.types.Scene) -> Matrix:
     bg = scene.symdrive.background
     if bg is None or bg.name not in scene.objects:
         return Matrix.Identity(4)
-    M = bg.matrix_world.copy()
+    M = (bg if depsgraph is None else bg.evaluated_get(depsgraph)).matrix_world.copy()
     scale = np.array(M.to_scale())
     if not np.allclose(scale, 1.0, atol=1e-5):
         raise errors.InputError(

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 
 from . import splat_display
-from .core import conventions, ply
+from .core import conventions, errors, ply
 
 
 def file_sha256(path: str | Path) -> str:
@@ -60,6 +60,8 @@ def import_splat_object(
     """Read ``path`` (raises ``InputError`` for anything that is not a valid 3DGS PLY) and link the object."""
     path = Path(path).resolve()
     gaussians = ply.read_splats(path)
+    if len(gaussians) == 0:
+        raise errors.InputError(path, "no splats (0 vertices): nothing to show or render", "element vertex")
     index = display_subset(len(gaussians), max_points)
     name = name or path.stem
     obj = bpy.data.objects.new(name, build_splat_mesh(name, gaussians, index))

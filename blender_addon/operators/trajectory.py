@@ -29,17 +29,33 @@ def _yaw_matrices(positions, yaws) -> list[np.ndarray]:
     return out
 
 
+CURVE_SURFACE = {"bevel_depth": 0.0, "extrude": 0.0, "bevel_object": None}  # what makes a curve a road's surface
+
+
 def curve_polyline(curve: bpy.types.Object, depsgraph) -> path_sampling.Polyline:
-    """The first spline of ``curve`` as evaluated (resolution, modifiers) in world coordinates."""
-    evaluated = curve.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
+    """The first spline of ``curve`` as evaluated (resolution, modifiers) in world coordinates:
+    its centre line, with any bevel or extrusion (a curve drawn as a road) set aside meanwhile."""
+    data = curve.data
+    saved = {k: getattr(data, k) for k in CURVE_SURFACE}
     try:
-        co = np.empty(len(mesh.vertices) * 3)
-        mesh.vertices.foreach_get("co", co)
-        edges = np.empty(len(mesh.edges) * 2, dtype=np.int64)
-        mesh.edges.foreach_get("vertices", edges)
+        if any(saved[k] != v for k, v in CURVE_SURFACE.items()):
+            for k, v in CURVE_SURFACE.items():
+                setattr(data, k, v)
+            depsgraph.update()
+        evaluated = curve.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            co = np.empty(len(mesh.vertices) * 3)
+            mesh.vertices.foreach_get("co", co)
+            edges = np.empty(len(mesh.edges) * 2, dtype=np.int64)
+            mesh.edges.foreach_get("vertices", edges)
+        finally:
+            evaluated.to_mesh_clear()
     finally:
-        evaluated.to_mesh_clear()
+        if any(getattr(data, k) != v for k, v in saved.items()):
+            for k, v in saved.items():
+                setattr(data, k, v)
+            depsgraph.update()
     co, edges = co.reshape(-1, 3), edges.reshape(-1, 2)
     if len(co) < 2 or len(edges) == 0:
         raise errors.InputError(curve.name, "curve has no evaluated geometry (at least two points needed)")

@@ -101,9 +101,22 @@ def angle_deg(value: str) -> float:
     return _float_between(value, 0.0, 90.0, "a number of degrees", "from 0 to 90 degrees")
 
 
+def positive_number(value: str) -> float:
+    """A finite number above 0 (a size, a rate, a memory budget, a duration)."""
+    x = _float_between(value, 0.0, sys.float_info.max, "a number", "a finite number above 0")
+    if x == 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number above 0, got {value}")
+    return x
+
+
+def number_at_least_zero(value: str) -> float:
+    """A finite number, 0 or more (0 meaning none or off where the option says so)."""
+    return _float_between(value, 0.0, sys.float_info.max, "a number", "a finite number, 0 or more")
+
+
 def loss_weight(value: str) -> float:
     """A loss term's weight: finite and at least 0 (0: the term is off)."""
-    return _float_between(value, 0.0, sys.float_info.max, "a number", "a finite number, 0 or more")
+    return number_at_least_zero(value)
 
 
 def _float_between(value: str, low: float, high: float, expected: str, bounds: str) -> float:

@@ -32,7 +32,9 @@ from . import (
     device_arg,
     distances_arg,
     given,
+    number_at_least_zero,
     positive_int,
+    positive_number,
     unit_fraction,
 )
 
@@ -151,7 +153,7 @@ def add_commands(sub) -> None:
     p.add_argument("--flux-vae", help="flux: FLUX.1-dev VAE folder (diffusers layout)")
     p.add_argument("--prompt", help="flux: prompt-embedding .safetensors from `symdrive flux-prompt`")
     p.add_argument("--rank", type=positive_int, help=f"flux: LoRA rank (default {default_of(FluxTrainConfig, 'rank')})")
-    p.add_argument("--lora-alpha", type=float, help="flux: LoRA alpha (default: the rank)")
+    p.add_argument("--lora-alpha", type=positive_number, help="flux: LoRA alpha (default: the rank)")
     p.add_argument("--lora-targets", type=lambda t: tuple(v.strip() for v in t.split(",") if v.strip()),
                    help="flux: comma-separated module names the LoRA adapts (default to_q,to_k,to_v,to_out.0)")
     p.add_argument("--grad-accum", type=positive_int, help="flux: batches accumulated per iteration "
@@ -181,7 +183,7 @@ def add_commands(sub) -> None:
     add_offsets_option(p, default=[0.5, 1.0, 1.5, 2.0, 3.0],
                        help="the views to restore (with --evaluate, the views --refine trains on; scoring "
                             "covers every offset with ground truth)")
-    p.add_argument("--step", type=float,
+    p.add_argument("--step", type=number_at_least_zero,
                    help=f"chain step d in metres (0 = single-view; default {default_of(StageOptions, 'ar_step')}, "
                         f"{default_of(StageOptions, 'guided_ar_step')} with --geometry-guided)")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
@@ -201,7 +203,7 @@ def add_commands(sub) -> None:
     p.add_argument("--keep-warp", action=argparse.BooleanOptionalAction,
                    help="a guided restorer's view keeps the warp where the recorded frames saw the ground "
                         "(default: what the weights record, chosen by an adaptation, else on)")
-    p.add_argument("--max-memory", type=float, metavar="GiB",
+    p.add_argument("--max-memory", type=positive_number, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on overlapping tiles "
                         f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
     p.add_argument("--out", type=Path, required=True,
@@ -242,9 +244,10 @@ def add_commands(sub) -> None:
 def _reconstruction(args):
     """The package, and the reconstruction PLY the command renders (``--gaussians``, else the manifest's)."""
     from ..errors import InputError
-    from ..scene import load_manifest
+    from ..scene import check_files, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
+    check_files(manifest)  # every file it names, ground truth included, before any long work
     ply = args.gaussians or manifest.resolve(manifest.background_splats)
     if ply is None:
         raise InputError(

@@ -17,7 +17,16 @@ from ..importers.kitti_raw import KittiRawConfig
 from ..importers.nuscenes import NuScenesConfig
 from ..importers.start_points import StartPointsConfig
 from ..importers.tracks import TRACK_FORMATS, TracksConfig
-from . import add_quiet_option, count_int, default_of, frames_arg, names_arg, positive_int
+from . import (
+    add_quiet_option,
+    count_int,
+    default_of,
+    frames_arg,
+    names_arg,
+    number_at_least_zero,
+    positive_int,
+    positive_number,
+)
 
 
 def _common(p, images: bool, camera_name: bool = True) -> None:
@@ -25,10 +34,10 @@ def _common(p, images: bool, camera_name: bool = True) -> None:
         p.add_argument("--images", help="folder of the recorded images (paths in the model are relative to it)")
     p.add_argument("--out", required=True, help="scene package folder to write (written whole, or not at all)")
     p.add_argument("--splats", help="trained 3DGS splat PLY in the same frame as the cameras")
-    p.add_argument("--camera-height", type=float,
+    p.add_argument("--camera-height", type=positive_number,
                    help="the cameras' height above the ground in metres: sets the metric scale from the fitted "
                         "ground, or with --scale (or without points) places the ground that far below the cameras")
-    p.add_argument("--scale", type=float, help="metres per source unit (--scale 1: the poses are metric)")
+    p.add_argument("--scale", type=positive_number, help="metres per source unit (--scale 1: the poses are metric)")
     p.add_argument("--up", help="the world's up direction x,y,z in the source frame (default: fitted ground "
                                 "plane, checked against the cameras' mean up vector)")
     p.add_argument("--heldout-every", type=positive_int, metavar="N",
@@ -38,7 +47,7 @@ def _common(p, images: bool, camera_name: bool = True) -> None:
     if camera_name:
         p.add_argument("--camera-name", default=DEFAULT_CAMERA,
                        help=f"name of the package camera when there is one ({DEFAULT_CAMERA})")
-    p.add_argument("--fps", type=float, default=DEFAULT_FPS,
+    p.add_argument("--fps", type=positive_number, default=DEFAULT_FPS,
                    help=f"frame rate for timestamps when the source has none ({DEFAULT_FPS:g})")
     p.add_argument("--name", help="scene name (default: the package folder's name)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -96,7 +105,7 @@ def add_commands(sub) -> None:
     p.add_argument("--kitti-camera", type=int, metavar="N",
                    help="the KITTI camera (0-3) the package camera is, for a KITTI calibration file (default: the one "
                         "a KITTI import notes in the package, else 0)")
-    p.add_argument("--min-depth", type=float, metavar="M",
+    p.add_argument("--min-depth", type=number_at_least_zero, metavar="M",
                    help="drop returns nearer to the camera than this, in metres (default: LidarConfig)")
     p.add_argument("--force", action="store_true", help="replace the camera's depth maps if it has some")
     add_quiet_option(p)
@@ -222,14 +231,8 @@ def _options(args, copy_images: bool = False):
     from ..errors import InputError
     from ..importers.package import Options, parse_up
 
-    if args.camera_height is not None and not args.camera_height > 0:
-        raise InputError("--camera-height", f"expected a positive height in metres, got {args.camera_height}")
-    if args.scale is not None and not args.scale > 0:
-        raise InputError("--scale", f"expected a positive number, got {args.scale}")
     if args.heldout_every is not None and args.heldout_every < 2:
         raise InputError("--heldout-every", f"expected N >= 2, got {args.heldout_every}")
-    if not args.fps > 0:
-        raise InputError("--fps", f"expected a positive frame rate, got {args.fps}")
     return Options(out=Path(args.out), camera_height=args.camera_height, scale=args.scale, up=parse_up(args.up),
                    heldout_every=args.heldout_every, copy_images=args.copy_images or copy_images, force=args.force, name=args.name)
 

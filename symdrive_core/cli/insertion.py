@@ -58,9 +58,10 @@ def add_commands(sub) -> None:
 
 def _insert(args) -> int:
     from ..insertion.render_actor import insert_actor
-    from ..scene import load_manifest
+    from ..scene import check_files, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
+    check_files(manifest)
     out = Path(args.out) if args.out else manifest.output_dir() / "insert"
     n = insert_actor(manifest, args.actor, out, background=args.gaussians, flip=args.flip_forward,
                      from_mesh=args.from_mesh, progress=not args.quiet, **given(args, n_samples="mesh_gaussians"))
@@ -73,11 +74,12 @@ def _insert_eval(args) -> int:
     from ..insertion.config import InsertionConfig
     from ..insertion.features import load_extractor
     from ..io.ply import read_splats
-    from ..scene import load_manifest
+    from ..scene import check_files, load_manifest
     from ..scene.ground_truth import require_truth
     from . import print_json, write_json
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
+    check_files(manifest)
     require_truth(manifest, "insertion", "insert-eval needs it; `symdrive insert` renders a vehicle without scoring")
     harmonizer = None
     if not args.no_harmonize:

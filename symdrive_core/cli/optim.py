@@ -109,9 +109,10 @@ def _reconstruct(args) -> int:
     import json
 
     from ..optim.reconstruct import SHADOW_SUFFIX, reconstruct, with_fitted
-    from ..scene import ManifestError, is_inside, load_manifest
+    from ..scene import ManifestError, check_files, is_inside, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
+    check_files(manifest)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
                                     "max_init_points", "seed", "exposure", "vehicle_alpha_weight", "driving_view_repeat",
                                     densify_until_fraction="densify_until"))

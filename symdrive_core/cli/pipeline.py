@@ -18,6 +18,7 @@ from . import (
     given,
     names_arg,
     positive_int,
+    positive_number,
 )
 
 
@@ -64,7 +65,7 @@ def add_commands(sub) -> None:
                         "training frames (lateral truth imported with --lateral-truth)")
     add_quiet_option(p)
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
-    p.add_argument("--max-memory", type=float, metavar="GiB",
+    p.add_argument("--max-memory", type=positive_number, metavar="GiB",
                    help="memory for one restorer evaluation; larger images run on tiles "
                         f"(default {default_of(StageOptions, 'sampler.max_memory_gib')})")
     add_external_assets_option(p)

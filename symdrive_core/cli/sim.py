@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from . import add_quiet_option, count_int, positive_int
+from . import add_quiet_option, count_int, positive_int, positive_number
 
 
 def add_commands(sub) -> None:
@@ -16,8 +16,8 @@ def add_commands(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="episode i runs from seed S + i (default %(default)s)")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
-    p.add_argument("--dt", type=float, help="seconds per step (default: the package's frame interval)")
-    p.add_argument("--time-limit", type=float, help="seconds per episode (default: twice the recorded drive)")
+    p.add_argument("--dt", type=positive_number, help="seconds per step (default: the package's frame interval)")
+    p.add_argument("--time-limit", type=positive_number, help="seconds per episode (default: twice the recorded drive)")
     p.add_argument("--traffic", choices=["replay", "sumo"],
                    help="actors on their recorded poses, or SUMO vehicles reacting to the ego")
     p.add_argument("--vehicles", type=count_int, help="SUMO vehicles on the road (with --traffic sumo)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..scene.road import road_from_spec
 from ..traffic.simulate import TrafficOptions
-from . import add_quiet_option, default_of, given, positive_int
+from . import add_quiet_option, default_of, given, number_at_least_zero, positive_int, positive_number
 
 
 def add_commands(sub) -> None:
@@ -13,12 +13,12 @@ def add_commands(sub) -> None:
     p = sub.add_parser("traffic", help="simulate traffic on the package's road with SUMO; write a new package "
                                        "whose actors are the vehicles")
     p.add_argument("package", help="scene package directory or its manifest.json")
-    p.add_argument("--density", type=float, required=True, help="vehicles per km per lane (0 = no traffic)")
-    p.add_argument("--seconds", type=float, required=True,
+    p.add_argument("--density", type=number_at_least_zero, required=True, help="vehicles per km per lane (0 = no traffic)")
+    p.add_argument("--seconds", type=positive_number, required=True,
                    help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
     p.add_argument("--seed", type=int,
                    help=f"random seed of the demand and of SUMO (default {default_of(TrafficOptions, 'seed')})")
-    p.add_argument("--speed", type=float,
+    p.add_argument("--speed", type=number_at_least_zero,
                    help=f"speed limit in m/s, 0 = standing (default {default_of(TrafficOptions, 'speed')})")
     p.add_argument("--manoeuvre", help="manoeuvre spec JSON (cut_in, lane_change, hard_brake), run through TraCI")
     p.add_argument("--assets", nargs="+", help="vehicle asset folders (with wlh.json) or folders holding them; "
@@ -27,7 +27,7 @@ def add_commands(sub) -> None:
     p.add_argument("--road", help="straight:LENGTH or curved:LENGTH:RADIUS instead of the package's road")
     p.add_argument("--lanes", type=positive_int,
                    help=f"lanes of a --road road (default {default_of(road_from_spec, 'lanes')})")
-    p.add_argument("--timeout", type=float,
+    p.add_argument("--timeout", type=positive_number,
                    help=f"wall-clock limit for SUMO in seconds (default {default_of(TrafficOptions, 'timeout')})")
     add_quiet_option(p)
     add_external_assets_option(p)

@@ -88,9 +88,10 @@ def evaluate_placement(manifest: Manifest, background, placement: HeldOut, harmo
 
 def evaluate_insertion(manifest: Manifest, background_gaussians, restorer=None, *, harmonizer: Harmonizer | None = None,
                        config: InsertionConfig | None = None, extractor=None, details: dict | None = None,
-                       progress: bool = True) -> list[dict]:
+                       progress: bool = True, frames: list[int] | None = None) -> list[dict]:
     """Rows ``{"method", "masked_psnr", "masked_ssim", "psnr"[, "frechet"]}`` averaged over the
-    package's held-out placements (report.json's ``metrics.insertion``).
+    package's held-out placements (report.json's ``metrics.insertion``), those at ``frames`` where
+    given (a run's frame window; none there: no rows).
 
     ``restorer`` is the diffusion model (or pass a ready ``harmonizer``); without either only the
     naive and colour-transfer rows are measured. ``extractor`` adds a Frechet distance between
@@ -106,7 +107,7 @@ def evaluate_insertion(manifest: Manifest, background_gaussians, restorer=None, 
         background_gaussians if isinstance(background_gaussians, GaussianTensors)
         else GaussianTensors.from_gaussians(background_gaussians))
     require_truth(manifest, "insertion")
-    placements = held_out_placements(manifest)
+    placements = [p for p in held_out_placements(manifest) if frames is None or p.frame in frames]
     timings: dict = {}
     results = [evaluate_placement(manifest, background, p, harmonizer, cfg, timings, progress)
                for p in tqdm(placements, desc="insertion", unit="placement", disable=not progress)]

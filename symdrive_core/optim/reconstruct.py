@@ -33,7 +33,7 @@ from ..io.ply import read_splats, write_splats
 from ..io.points import read_points
 from ..scene import Manifest
 from ..scene.depth import measured
-from ..scene.ground_truth import split_frames
+from ..scene.ground_truth import fitting_split
 from ..scene.poses import travels
 from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
@@ -537,7 +537,7 @@ class Fit:
         cameras = training_cameras(manifest)
         weights = {c.name: cfg.depth_weight_for(c) for c in cameras}
         cfg = replace(cfg, depth_weight=max(weights.values()))
-        train_frames, heldout = split_frames(manifest, cfg.holdout_every)
+        train_frames, heldout = fitting_split(manifest, cfg.holdout_every)
         views = load_views(manifest, train_frames, depth=True)
         if cfg.camera_refine.enabled:
             views = recorded_views(manifest, views)

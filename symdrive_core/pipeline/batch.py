@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
+from ..errors import InputError
 from .plan import PlanOptions, run_cameras
 from .run import run_scene
 
@@ -32,13 +33,29 @@ def _render_chunk(package: str, out: str, camera: str, frames: list[int], device
     return render_frames(manifest, plan, Path(out), [(camera, f) for f in frames], device, progress=False)
 
 
+def check_all(packages: list[str], options: PlanOptions | None, allow_external: bool) -> None:
+    """Every package loads, names files that are there, and plans; checked before any runs, so a
+    bad package late in the list stops the batch before it has written anything."""
+    from ..scene import check_files, load_manifest
+    from .plan import make_plan
+
+    for package in packages:
+        manifest = load_manifest(package, allow_external=allow_external)
+        check_files(manifest)
+        make_plan(manifest, options)
+
+
 def run_batch(packages: list[str], out_root: str | Path, *, executor: str = "local", ray_address: str | None = None,
               frames_per_task: int = 4, options: PlanOptions | None = None, device: str = "cpu",
               progress: bool = True, force: bool = False, allow_external: bool = False) -> list[dict]:
     out_root = Path(out_root)
     outs = [scene_out_dir(out_root, p) for p in packages]
-    if len(set(outs)) != len(outs):
-        raise ValueError("two packages share a directory name; give them distinct names")
+    for i, out in enumerate(outs):
+        if out in outs[:i]:
+            first = packages[outs.index(out)]
+            raise InputError(packages[i], f"its output {out} is that of {first} too: give the packages' folders "
+                             "distinct names", "PACKAGES")
+    check_all(packages, options, allow_external)
     run = dict(options=options, device=device, force=force, allow_external=allow_external)
     if executor == "local":
         return [run_scene(p, o, progress=progress, **run) for p, o in zip(packages, outs)]

@@ -1,8 +1,8 @@
 """The key a run's outputs are cached under: everything that changes the result, and nothing else.
 
 A run reuses a folder's outputs only when this key matches the one they were made under:
-the manifest, the identity of every file it names (size, mtime, inode, and the bytes of small
-files), the plan and stage options, the device, the code and the restorer weights. Files in the
+the manifest, the identity of every file it names, ground truth included (size, mtime, inode,
+and the bytes of small files), the plan and stage options, the device, the code and the restorer weights. Files in the
 package that the manifest does not name (its default output folder among them) play no part.
 """
 
@@ -50,6 +50,7 @@ def inputs_key(manifest, plan_options=None, stage_options=None, device: str = "c
         "stage_options": asdict(stage_options) if stage_options is not None else None,
         "device": device,
         "code": code_version(),
-        "files": {rel: file_identity(manifest.resolve(rel)) for _, rel in manifest.asset_refs()},
+        "files": {rel: file_identity(manifest.resolve(rel))
+                  for rel in [r for _, r in manifest.asset_refs()] + [r for _, r, _ in manifest.ground_truth_refs()]},
     }
     return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]

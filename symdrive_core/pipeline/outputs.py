@@ -9,6 +9,7 @@ that no run wrote is recognised as somebody else's.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -25,7 +26,10 @@ ASSET_CACHE = "asset_cache"  # mesh-only actors' sampled splats, shared by the s
 # outlive a change of the run's key, which mostly changes how views are restored, not the drive
 ADAPT_CACHE = "adapt"
 KEYED_CACHES = frozenset({ADAPT_CACHE})
-BOOKKEEPING = frozenset({JOURNAL, LOCK, STATE, REPORT})
+BOOKKEEPING = frozenset({JOURNAL, LOCK})
+# A run's records: claimed like every output, and taken as a run's in a folder with a journal
+# even where an older run wrote them unclaimed; in a folder without one they are somebody else's.
+RUN_RECORDS = frozenset({STATE, REPORT})
 # Temporaries of io.atomic: ".<stem>.<random>.part<ext>" (files), ".<name>.<random>.part" and
 # ".<name>.old-<pid>" (folders); the random part is tempfile's.
 _TEMP = re.compile(r"^\.(?P<base>.+)\.(?:[A-Za-z0-9_]+\.part(?P<ext>\.[^.]*)?|old-\d+)$")
@@ -49,11 +53,15 @@ class OutputTree:
     # ---------------------------------------------------------------- paths
 
     def path(self, *parts: str | os.PathLike) -> Path:
-        """``root/parts...`` for writing; refused (OutputError) if it would lie outside the root."""
+        """``root/parts...`` for writing; refused (OutputError) if it would lie outside the root,
+        or if a file no run here wrote is there (never written over, nor read as done)."""
         rel = _relative(self.root, parts)
         target = self.root.joinpath(*rel.parts)
         if not target.resolve().is_relative_to(self.real_root):  # a symlink inside pointing out
             raise OutputError(f"{self.root}: refusing to write outside the output folder: {rel}")
+        if (target.exists() or target.is_symlink()) and not self.owns(rel.as_posix()):
+            raise OutputError(f"{self.root}: {rel} is there and no symdrive run wrote it: refusing to write over it; "
+                              "choose a new or empty --out")
         self._claim(rel.as_posix())
         return target
 
@@ -95,13 +103,15 @@ class OutputTree:
         p = PurePosixPath(rel)
         if rel in BOOKKEEPING or rel in claimed:
             return True
+        if rel in RUN_RECORDS:
+            return (self.root / JOURNAL).is_file()
         if any(str(a) + "/" in claimed for a in p.parents if str(a) != "."):
             return True
         m = _TEMP.match(p.name)  # a temporary of a claimed file or folder
         if m:
             stem = m.group("base") + (m.group("ext") or "")
             target = (p.parent / stem).as_posix().removeprefix("./")
-            return target in BOOKKEEPING or target in claimed or target + "/" in claimed
+            return target in BOOKKEEPING | RUN_RECORDS or target in claimed or target + "/" in claimed
         return False
 
     def foreign_files(self) -> list[str]:
@@ -163,6 +173,25 @@ class OutputTree:
                     shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
                     removed += 1
         return removed
+
+
+@contextlib.contextmanager
+def unmade_if_refused(root: Path):
+    """Run the body; if it is refused (a :class:`SymDriveError`: bad input found before anything
+    was written), the folders made for ``root`` on the way are removed again, where empty."""
+    root = Path(root).absolute()
+    top = next((p for p in [*reversed(root.parents), root] if not p.exists()), None)
+    try:
+        yield
+    except SymDriveError:
+        d = root
+        while top is not None and d.is_relative_to(top):
+            try:
+                d.rmdir()
+            except OSError:
+                break
+            d = d.parent
+        raise
 
 
 def _relative(root: Path, parts) -> PurePosixPath:

@@ -103,20 +103,17 @@ def sh_degree_of(path: Path) -> int:
 def check_renderable(manifest: Manifest, reconstructs: bool = False) -> None:
     """Every actor can be rendered: it names a readable splat PLY (what it renders from), or no
     splats and a readable mesh (sampled into splats at render time), or it is a recorded vehicle
-    with a box that this run's reconstruction fits (``reconstructs``), or one left where the drive
-    saw it in a package whose background splats were fitted with it there. Otherwise the plan stops,
+    with a box that this run's reconstruction fits (``reconstructs``). Otherwise the plan stops,
     naming the actor and why (``ManifestError`` at ``actors[i].assets``: exit 2)."""
     from ..io.mesh import read_mesh
 
     for i, a in enumerate(manifest.actors):
         if not (a.splats or a.mesh) and a.kind == "existing":
-            if reconstructs or (manifest.background_splats and not a.edited_frames()):
-                continue  # fitted by this run, or drawn by the background splats where the drive saw it
-            drawn = " and is edited: the background splats draw it only where the drive saw it" \
-                if manifest.background_splats else " yet"
+            if reconstructs:
+                continue
             raise ManifestError(manifest.path or manifest.root, f"actor {a.id!r} is a recorded vehicle with no "
-                                f"Gaussians of its own{drawn}; 'symdrive reconstruct' fits it in its box (with the "
-                                "background)", f"actors[{i}].assets")
+                                "Gaussians yet: 'symdrive reconstruct' fits it in its box (with the background)",
+                                f"actors[{i}].assets")
         if a.splats:
             path, what = manifest.resolve(a.splats), f"splat file {a.splats!r}"
         elif a.mesh:
@@ -130,8 +127,11 @@ def check_renderable(manifest: Manifest, reconstructs: bool = False) -> None:
         else:
             try:
                 if a.splats:
-                    if not any(el.name == "vertex" for el in read_header(path).elements):
+                    vertex = next((el for el in read_header(path).elements if el.name == "vertex"), None)
+                    if vertex is None:
                         raise InputError(path, "no 'vertex' element: not a splat file")
+                    if vertex.count == 0:
+                        raise InputError(path, "no splats (0 vertices)")
                 else:
                     read_mesh(path)
                 continue
@@ -274,14 +274,13 @@ def _inpaint(manifest: Manifest, in_window: list[int], windowed: bool) -> StageD
 
 def _reconstruct(manifest: Manifest, frames: list[int]) -> StageDecision:
     if manifest.background_splats:
-        baked = [a.id for a in manifest.actors if a.kind == "existing" and not (a.splats or a.mesh)]
-        return StageDecision("reconstruct", False, "background splats given" + (
-            f" (they draw {len(baked)} recorded vehicle(s) without Gaussians of their own where the drive saw them: "
-            f"{', '.join(baked)})" if baked else ""))
+        return StageDecision("reconstruct", False, "background splats given")
     if not (manifest.background_points and _has_ground_truth(manifest)):
         return StageDecision("reconstruct", False, "no background splats and no images to fit")
     from ..optim.decompose import tracks
+    from ..scene.ground_truth import fitting_split
 
+    fitting_split(manifest)  # a frame to learn from, or the plan stops naming the split
     recorded = [t.actor_id for t in tracks(manifest)]
     return StageDecision("reconstruct", True, "no background splats: fit them to the images" + (
         f", and {len(recorded)} recorded vehicle(s) in their own frames" if recorded else ""), frames, recorded)

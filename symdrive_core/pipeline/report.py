@@ -39,11 +39,11 @@ class Report:
         return {"version": REPORT_VERSION, "scene": self.scene, "device": self.device,
                 "stages": self.stages, "metrics": self.metrics, **self.extra}
 
-    def write(self, out_dir: Path) -> Path:
-        return write_report_json(out_dir, self.to_json())
+    def write(self, path: Path) -> Path:
+        return write_report_json(path, self.to_json())
 
 
-def write_report_json(out_dir: Path, report: dict) -> Path:
-    path = Path(out_dir) / "report.json"
-    write_text_atomic(path, json.dumps(report, indent=1) + "\n")
-    return path
+def write_report_json(path: Path, report: dict) -> Path:
+    """``report`` at ``path`` (an output folder's ``report.json``, as its tree hands it out)."""
+    write_text_atomic(Path(path), json.dumps(report, indent=1) + "\n")
+    return Path(path)

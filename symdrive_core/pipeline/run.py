@@ -16,7 +16,7 @@ from pathlib import Path
 from ..scene import Manifest, check_files, load_manifest
 from .cache_key import inputs_key
 from .lock import OutputLock
-from .outputs import OutputTree
+from .outputs import REPORT, OutputTree, unmade_if_refused
 from .plan import APPLIED_INSIDE, Plan, PlanOptions, make_plan
 from .report import Report
 from .stages import STAGE_RUNNERS, Shared, StageOptions, merge_metrics
@@ -45,7 +45,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
     check_files(manifest)
     options, stage_options = options or PlanOptions(), stage_options or StageOptions()
     tree = OutputTree(Path(out_dir) if out_dir is not None else manifest.output_dir())
-    with OutputLock(tree.root) if lock else contextlib.nullcontext():
+    with unmade_if_refused(tree.root), OutputLock(tree.root) if lock else contextlib.nullcontext():
         state, plan = open_output(manifest, tree, options, stage_options, device, force)
         report = Report(manifest.name, device, extra={"cameras": plan.cameras})
         ctx = RunContext(manifest, plan, tree, state, device, progress, stage_options, Shared())
@@ -65,7 +65,7 @@ def run_scene(package, out_dir=None, *, options: PlanOptions | None = None, devi
                 state.finish(name, dt, result.metrics)
                 merge_metrics(report.metrics, result.metrics)
                 report.stage(name, True, decision.reason, dt, result.details)
-        report.write(tree.root)
+        report.write(tree.path(REPORT))
     return report.to_json()
 
 

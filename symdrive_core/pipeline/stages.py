@@ -484,20 +484,25 @@ def finetune_stage(ctx) -> StageResult:
 
 @stage("evaluate")
 def evaluate_stage(ctx) -> StageResult:
-    """Every metric the package's ground truth allows: held-out reconstruction, insertion."""
+    """Every metric the package's ground truth allows: held-out reconstruction, insertion; in
+    the run's frame window, where it has one."""
     from ..eval.insertion import evaluate_insertion
     from ..eval.views import evaluate_heldout
+    from ..insertion.placements import held_out_placements
     from ..scene.ground_truth import split_frames
 
     m, opts, details, metrics = ctx.manifest, ctx.options, {}, {}
+    window = ctx.plan.window
     has_background = background_path(ctx) is not None
-    if has_background and split_frames(m)[1] and all(c.frames[0].image for c in m.cameras):
-        metrics["reconstruction"] = evaluate_heldout(m, background(ctx), actors=recorded_vehicles(ctx),
+    heldout = [f for f in split_frames(m)[1] if window is None or f in window]
+    if has_background and heldout and all(c.frames[0].image for c in m.cameras):
+        metrics["reconstruction"] = evaluate_heldout(m, background(ctx), heldout, actors=recorded_vehicles(ctx),
                                                      shadows=recorded_shadows(ctx), exposure=exposure(ctx))
-    if has_insertion_truth(m) and has_background:
+    placed = has_insertion_truth(m) and any(window is None or p.frame in window for p in held_out_placements(m))
+    if placed and has_background:
         harmonizer = _harmonizer(ctx) if ctx.plan.runs("harmonize") else None
         cfg = replace(opts.insertion, assets_out=ctx.tree.folder("insertion_assets"))
         metrics["insertion"] = evaluate_insertion(m, background(ctx), harmonizer=harmonizer, config=cfg,
-                                                  details=details, progress=ctx.progress)
+                                                  details=details, progress=ctx.progress, frames=window)
     return StageResult({"metrics": sorted(metrics), **({"timings": details["timings"]} if "timings" in details else {})},
                        metrics)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
-from .outputs import REPORT, STATE, OutputError, OutputTree
+from .outputs import REPORT, RUN_RECORDS, STATE, OutputError, OutputTree
 
 
 @dataclass
@@ -42,15 +42,18 @@ class RunState:
         if foreign and not force:
             raise OutputError(f"{tree.root}: holds {len(foreign)} file(s) that no symdrive run wrote here "
                               f"(first: {foreign[0]}); choose a new or empty --out, or pass --force to run "
-                              f"beside them (they are never deleted)")
+                              f"beside them (they are never deleted or written over)")
+        if taken := sorted(set(foreign) & RUN_RECORDS):
+            raise OutputError(f"{tree.root}: {taken[0]} is there and no symdrive run wrote it: a run writes its own "
+                              "there; choose a new or empty --out")
         raw = cls.load_raw(tree.root)
         if raw is not None and raw.get("inputs_hash") == inputs_hash:
             tree.remove_temporaries()
-            return cls(tree.root / STATE, inputs_hash, list(raw.get("completed", [])),
+            return cls(tree.path(STATE), inputs_hash, list(raw.get("completed", [])),
                        dict(raw.get("seconds", {})), dict(raw.get("metrics", {})))
         tree.remove_written()
-        (tree.root / REPORT).unlink(missing_ok=True)  # the report of other inputs
-        state = cls(tree.root / STATE, inputs_hash)
+        (tree.root / REPORT).unlink(missing_ok=True)  # the report of other inputs (a run's: checked above)
+        state = cls(tree.path(STATE), inputs_hash)
         state.save()
         return state
 

@@ -56,6 +56,16 @@ def split_frames(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int],
     return train, heldout
 
 
+def fitting_split(manifest: Manifest, holdout_every: int = 5) -> tuple[list[int], list[int]]:
+    """:func:`split_frames` for a fit, which needs a frame to learn from (every frame held out
+    is a fine split to score a given reconstruction, not to make one)."""
+    train, heldout = split_frames(manifest, holdout_every)
+    if not train:
+        raise ManifestError(manifest.path or manifest.root, f"all {len(heldout)} frames are held out: no frame to "
+                            "reconstruct from", "ground_truth.train_frames")
+    return train, heldout
+
+
 @dataclass
 class LateralView(SeenBy):
     offset_m: float

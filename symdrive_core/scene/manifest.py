@@ -210,6 +210,30 @@ class Manifest:
             refs.append((f"masks.id_maps[{mi}].path", e.path))
         return [(w, r) for w, r in refs if r is not None]
 
+    def ground_truth_refs(self) -> list[tuple[str, str, str | None]]:
+        """(field path, path as written, the camera whose size it has) of every image
+        ``ground_truth`` names (see :mod:`.ground_truth` for its layout)."""
+        gt = self.ground_truth or {}
+        refs: list[tuple[str, Any, Any]] = []
+
+        def frames(entry: dict, where: str, camera) -> None:
+            for k, rel in (entry.get("frames") or {}).items():
+                refs.append((f"{where}.frames.{k}", rel, entry.get("camera", camera)))
+
+        for li, e in enumerate(gt.get("lateral", [])):
+            frames(e, f"ground_truth.lateral[{li}]", gt.get("camera"))
+        lanes = gt.get("lanes") or {}
+        for k, rel in (lanes.get("recorded") or {}).items():
+            refs.append((f"ground_truth.lanes.recorded.{k}", rel, lanes.get("camera")))
+        for li, e in enumerate(lanes.get("lateral", [])):
+            frames(e, f"ground_truth.lanes.lateral[{li}]", lanes.get("camera"))
+        for key, entries in (("insertion", ("with", "without", "mask", "shadow_mask")), ("edits", ("image", "mask"))):
+            for i, e in enumerate(gt.get(key, [])):
+                refs += [(f"ground_truth.{key}[{i}].{k}", e[k], e.get("camera")) for k in entries if e.get(k)]
+        if gt.get("vehicles"):
+            frames(gt["vehicles"], "ground_truth.vehicles", None)
+        return [(w, r, c) for w, r, c in refs if isinstance(r, str)]
+
     def field_of(self, rel: str) -> str:
         """The field path that holds ``rel`` (for messages), ``ground_truth`` included."""
         for where, r in self.asset_refs():
@@ -352,6 +376,9 @@ def _check_ground_truth_refs(rd: "_Reader", gt: dict, cam_names: set, nf: int) -
             frame(f, f"ground_truth.{key}[{i}]")
     def lateral(entries, where):
         for li, e in enumerate(entries):
+            off = e.get("offset_m")
+            if isinstance(off, bool) or not isinstance(off, (int, float)) or not np.isfinite(off):
+                rd.fail(f"{where}[{li}].offset_m", f"expected a finite offset in metres, got {off!r}")
             if "camera" in e:
                 camera(e["camera"], f"{where}[{li}].camera")
             for k in e["frames"]:
@@ -745,7 +772,11 @@ def check_files(m: Manifest, *, headers: bool = True) -> None:
     for mi, e in enumerate(m.id_maps):
         kinds[f"masks.id_maps[{mi}].path"] = ("image", sizes.get(e.camera))
     where_file = m.path or m.root
-    for where, rel in m.asset_refs():
+    refs = m.asset_refs()
+    for where, rel, camera in m.ground_truth_refs():
+        refs.append((where, rel))
+        kinds[where] = ("image", sizes.get(camera))
+    for where, rel in refs:
         full = m.resolve(rel, where)
         if not full.exists():
             raise ManifestError(where_file, f"file not found: {rel}", where)

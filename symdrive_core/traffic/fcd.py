@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io import check_regular
 
 TIME_EPS = 1e-6  # a time this close to a track's ends is inside it (FCD times are rounded)
 
@@ -87,6 +88,7 @@ def _number(path: Path, el: ET.Element, key: str, where: str, default: float | N
 def read_fcd(path: str | os.PathLike) -> dict[str, Track]:
     """All vehicle tracks of an FCD file; errors name the file and the timestep/vehicle field."""
     path = Path(path)
+    check_regular(path, "fcd-export")  # a folder (no file chosen) or a FIFO: one line, not a traceback
     rows: dict[str, list[tuple[float, ...]]] = {}
     types: dict[str, str] = {}
     time = None

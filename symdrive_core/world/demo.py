@@ -145,6 +145,7 @@ def _run_demo(tree: OutputTree, options: tuple[PlanOptions, StageOptions], quick
     from ..io.atomic import write_text_atomic
     from ..io.images import read_image
     from ..io.ply import read_splats
+    from ..pipeline.outputs import REPORT
     from ..pipeline.report import write_report_json
     from ..pipeline.run import run_scene
     from ..scene import load_manifest
@@ -196,7 +197,7 @@ def _run_demo(tree: OutputTree, options: tuple[PlanOptions, StageOptions], quick
         _montage(figures / "trajectory.png", [(f"frame {int(q.stem)}", read_image(q, channels=3)) for q in picks])
     report["demo_seconds"] = round(time.perf_counter() - t0, 1)
     report["demo_mode"] = "quick" if quick else "full"
-    write_report_json(out, report)
+    write_report_json(tree.path(REPORT), report)
     write_text_atomic(tree.path("report.md"), format_markdown(report, figures))
     return report
 

@@ -41,17 +41,6 @@ def write_obj(path: Path, verts: np.ndarray, tris: np.ndarray) -> Path:
     return path
 
 
-def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    verts, tris = [], []
-    for line in Path(path).read_text().splitlines():
-        parts = line.split()
-        if parts and parts[0] == "v":
-            verts.append([float(p) for p in parts[1:4]])
-        elif parts and parts[0] == "f":
-            tris.append([int(p.split("/")[0]) - 1 for p in parts[1:4]])
-    return np.array(verts), np.array(tris)
-
-
 def surface_splats(verts: np.ndarray, tris: np.ndarray, n: int, seed: int = 0, degree: int = 0) -> Gaussians:
     """Small Gaussians sampled uniformly on a triangle mesh (a splat twin of the mesh)."""
     rng = np.random.default_rng(seed)

@@ -7,10 +7,10 @@ import pytest
 from blender_addon import actors
 from symdrive_core import conventions
 from symdrive_core.io.images import read_id_map, read_mask
+from symdrive_core.io.mesh import read_mesh
 from symdrive_core.io.ply import read_splats
 from symdrive_core.scene import check_files, load_manifest
 from symdrive_core.scene.manifest import SCHEMA_PATH
-from tests.addon.assets import read_obj
 from tests.addon.scenes import HEIGHT, WIDTH, iou, rasterize_triangles, two_car_scene
 
 pytestmark = pytest.mark.blender
@@ -61,7 +61,8 @@ def test_masks_match_the_core_projection_of_each_actor(exported):
     masks = {(e.frame, e.actor): e for e in m.masks}
     ious = {}
     for actor in m.actors:
-        verts, tris = read_obj(m.resolve(actor.mesh))
+        mesh = read_mesh(m.resolve(actor.mesh))  # the GLB the export writes, in the actor's frame
+        verts, tris = mesh.verts, mesh.tris
         means = read_splats(m.resolve(actor.splats)).means
         for i, pose in enumerate(actor.poses):
             cf = cam.frames[i]

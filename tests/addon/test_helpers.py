@@ -82,6 +82,11 @@ def test_fcd_errors_name_the_field(tmp_path, body, field):
         fcd.read_fcd(_fcd(tmp_path, body))
 
 
+def test_fcd_named_by_a_folder_is_refused_naming_it(tmp_path):  # an import dialog with no file chosen
+    with pytest.raises(InputError, match="cannot open|not a regular file"):
+        fcd.read_fcd(tmp_path)
+
+
 def test_fcd_rejects_other_xml(tmp_path):
     p = tmp_path / "net.xml"
     p.write_text("<net/>")

@@ -78,6 +78,17 @@ def test_every_frames_option_takes_the_one_syntax(base, option):
     # a device this build lacks (CUDA on a CPU-only torch or a GPU index past the last)
     (["run", PKG, "--device", "cuda:99"], "run", "argument --device"),
     (["render", PKG, "--camera", "front", "--device", "tpu", "--out", "OUT"], "render", "argument --device"),
+    # numbers that must be finite (and above 0, or 0 or more)
+    (["run", PKG, "--max-memory", "nan"], "run", "argument --max-memory: must be a finite number above 0, got nan"),
+    (["run", PKG, "--max-memory", "0"], "run", "argument --max-memory: must be a finite number above 0, got 0"),
+    (["restore", PKG, "--max-memory", "inf", "--out", "OUT"], "restore", "argument --max-memory: must be a finite"),
+    (["restore", PKG, "--step", "nan", "--out", "OUT"], "restore", "argument --step: must be a finite number, 0 or more"),
+    (["restore", PKG, "--step", "-1", "--out", "OUT"], "restore", "argument --step: must be a finite number, 0 or more"),
+    (["import", "colmap", "M", "--out", "OUT", "--fps", "inf"], "import colmap", "argument --fps: must be a finite"),
+    (["import", "kitti", "S", "--out", "OUT", "--camera-height", "-1.6"], "import kitti",
+     "argument --camera-height: must be a finite number above 0"),
+    (["sim", PKG, "--dt", "0", "--out", "OUT"], "sim", "argument --dt: must be a finite number above 0"),
+    (["traffic", PKG, "--density", "-1", "--seconds", "1"], "traffic", "argument --density: must be a finite"),
     # plain argparse: a wrong type, a missing required option, a choice not offered
     (["reconstruct", PKG, "--iters", "many"], "reconstruct", "argument --iters"),
     (["restore", PKG], "restore", "--out"),
@@ -109,7 +120,6 @@ def test_a_bad_argument_exits_2_naming_the_command(tmp_path, capsys, argv, comma
     (["render", PKG, "--camera", "front", "--frames", "0:999", "--out", "OUT"], "render", "--frames"),
     (["render", PKG, "--camera", "nope", "--out", "OUT"], "render", "no camera named 'nope'"),
     (["sim", PKG, "--size", "0x3", "--out", "OUT"], "sim", "--size"),
-    (["sim", PKG, "--dt", "0", "--out", "OUT"], "sim", "--dt"),
     (["traffic", PKG, "--density", "1", "--seconds", "1", "--road", "bogus"], "traffic", "--road"),
 ])
 def test_a_bad_value_found_after_parsing_exits_2_naming_the_command(tmp_path, capsys, argv, command, says):

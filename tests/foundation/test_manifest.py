@@ -111,3 +111,43 @@ def test_cli_info(make_package, capsys):
     out = capsys.readouterr().out
     assert "50 splats, SH degree 1" in out and "bounds min" in out
     assert main(["info", str(path.parent / "nope.ply")]) == 2
+
+
+def _with_lateral_truth(path, image: str, offset=0.5):
+    """The package at ``path`` with one lateral truth image of frame 0, ``image`` as written."""
+    d = json.loads(path.read_text())
+    d["ground_truth"] = {"camera": "front", "lateral": [{"offset_m": offset, "camera": "front",
+                                                         "frames": {"0": image}}]}
+    path.write_text(json.dumps(d))
+
+
+@pytest.mark.parametrize("image, says", [
+    ("nope.png", "file not found: nope.png"),
+    ("../../etc/hostname", "is outside the package"),
+    ("small.png", "image is 16x12, the camera is 32x24"),
+])
+def test_validate_checks_the_ground_truths_images_naming_their_field(make_package, capsys, image, says):
+    from symdrive_core.io.images import write_image
+
+    path = make_package()
+    write_image(path.parent / "small.png", np.zeros((12, 16, 3), np.float32))
+    _with_lateral_truth(path, image)
+    out = path.parent.parent / "restored"
+    for command in (["validate", str(path)], ["restore", str(path.parent), "--evaluate", "--out", str(out)]):
+        assert main(command) == 2  # restore refuses before any work
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "ground_truth.lateral[0].frames.0" in err and says in err, err
+    assert not out.exists()
+
+
+def test_a_lateral_truth_offset_that_is_not_a_finite_number_is_refused(make_package, capsys):
+    from symdrive_core.io.images import write_image
+
+    path = make_package()
+    write_image(path.parent / "gt.png", np.zeros((24, 32, 3), np.float32))
+    _with_lateral_truth(path, "gt.png")
+    assert main(["validate", str(path)]) == 0
+    capsys.readouterr()
+    _with_lateral_truth(path, "gt.png", offset=float("nan"))
+    assert main(["validate", str(path)]) == 2
+    assert "ground_truth.lateral[0].offset_m: expected a finite offset in metres, got nan" in capsys.readouterr().err

@@ -156,18 +156,30 @@ def _recorded_vehicle_without_gaussians(manifest_path, moved_m: float = 0.0):
     return load_manifest(manifest_path)
 
 
-def test_background_splats_draw_an_unedited_recorded_vehicle_without_gaussians(make_package, capsys):
-    path = make_package()
-    plan = make_plan(_recorded_vehicle_without_gaussians(path))
-    reconstruct = plan.stage("reconstruct")
-    assert not reconstruct.run and "they draw 1 recorded vehicle(s) without Gaussians of their own" in reconstruct.reason
-    assert main(["plan", str(path.parent)]) == 0, capsys.readouterr().err
+def test_a_fit_with_every_frame_held_out_stops_naming_the_split(tmp_path, capsys):
+    from symdrive_core.io.points import write_points
+    from tests.conftest import manifest_dict, write_recorded_images
+
+    root = tmp_path / "pkg"
+    root.mkdir()
+    d = manifest_dict(actors=(), background=None)
+    write_recorded_images(root, d, random_gaussians(200, 0, 1, (10, 0, 1), 3.0))
+    pts = np.random.default_rng(0).normal(size=(50, 3)) + [10, 0, 1]
+    write_points(root / "points.ply", pts, np.full_like(pts, 0.5))
+    d["background"] = {"splats": None, "points": "points.ply"}
+    d["ground_truth"] = {"camera": "front", "train_frames": [], "heldout_frames": [0, 1, 2]}
+    (root / "manifest.json").write_text(json.dumps(d))
+    for command in (["plan", str(root)], ["reconstruct", str(root), "--out", str(tmp_path / "fit")]):
+        assert main(command) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "ground_truth.train_frames: all 3 frames are held out" in err, err
+    assert not (tmp_path / "fit").exists()
 
 
-def test_an_edited_recorded_vehicle_without_gaussians_stops_the_plan_naming_it(make_package, capsys):
+def test_a_run_refused_at_its_plan_leaves_no_output_folder_behind(make_package, tmp_path, capsys):
     path = make_package()
     _recorded_vehicle_without_gaussians(path, moved_m=3.0)
-    assert main(["plan", str(path.parent)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "actors[0].assets: actor 'car_0' is a recorded vehicle with no Gaussians" \
-        " of its own and is edited" in err, err
+    out = tmp_path / "runs" / "deep" / "er"
+    assert main(["run", str(path.parent), "--out", str(out), "--quiet"]) == 2
+    assert "actor 'car_0' is a recorded vehicle with no Gaussians yet" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()

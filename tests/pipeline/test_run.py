@@ -102,6 +102,29 @@ def test_killed_run_resumes_without_redoing_finished_frames(make_package, tmp_pa
     assert not list(out.rglob(".*.part*")), "a temporary file of the killed run was left behind"
 
 
+def test_a_batch_checks_every_package_before_it_runs_any(make_package, tmp_path, capsys):
+    good = make_package("good", n_frames=2).parent
+    bad = make_package("bad", n_frames=2)
+    d = json.loads(bad.read_text())
+    d["actors"][0]["assets"]["splats"] = "missing.ply"
+    bad.write_text(json.dumps(d))
+    assert main(["batch", str(good), str(bad.parent), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "actors[0].assets.splats: file not found: missing.ply" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_two_packages_of_one_folder_name_are_refused_naming_both(make_package, tmp_path, capsys):
+    (tmp_path / "day1").mkdir()
+    (tmp_path / "day2").mkdir()
+    a = make_package("day1/street").parent
+    b = make_package("day2/street").parent
+    assert main(["batch", str(a), str(b), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{b}: PACKAGES: its output" in err and f"that of {a} too" in err, err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.slow
 def test_ray_executor_gives_the_same_outputs_as_local(make_package, tmp_path):
     ray = pytest.importorskip("ray")

@@ -92,3 +92,21 @@ def test_plan_takes_the_same_window_as_run(recorded_package, capsys):
     stages = {s["name"]: s for s in json.loads(capsys.readouterr().out)["stages"]}
     assert stages["render"]["frames"] == [1] and stages["restore"]["frames"] == [1]
     assert stages["restore"]["offsets"] == [-0.5, 0.5]
+
+
+def test_scoring_keeps_to_the_frame_window(tmp_path):
+    root = tmp_path / "pkg"
+    root.mkdir()
+    d = manifest_dict(n_frames=4, actors=())
+    background = random_gaussians(200, 0, 1, (10, 0, 1), 3.0)
+    write_splats(root / "background.ply", background)
+    write_recorded_images(root, d, background)
+    d["ground_truth"] = {"camera": "front", "train_frames": [0, 2], "heldout_frames": [1, 3]}
+    (root / "manifest.json").write_text(json.dumps(d))
+    scored = {}
+    for window in ("0:3", "3", "0"):
+        out = tmp_path / f"out{window.replace(':', '_')}"
+        assert main(["run", str(root), "--out", str(out), "--quiet", "--frames", window]) == 0
+        scored[window] = json.loads((out / "report.json").read_text())["metrics"].get("reconstruction", {})
+    assert scored["0:3"]["frames"] == 2 and scored["3"]["frames"] == 1
+    assert scored["0"] == {}  # no held-out frame in the window: nothing scored

@@ -80,3 +80,28 @@ def test_partial_files_of_a_killed_run_are_removed_but_not_anyone_elses(tmp_path
     assert main(["run", str(pkg), "--out", str(out), "--quiet"]) == 0
     assert not ours.exists()
     assert json.loads((out / "state.json").read_text())["inputs_hash"] == state["inputs_hash"]
+
+
+def test_a_users_report_or_state_in_the_output_is_theirs_not_the_runs(tmp_path, capsys):
+    pkg = write_package(tmp_path / "pkg")
+    for name in ("report.json", "state.json"):
+        out = tmp_path / f"out_{name}"
+        out.mkdir()
+        (out / name).write_text('{"my": "quarterly numbers"}')
+        for force in ([], ["--force"]):  # refused either way: a run writes its own there
+            assert main(["run", str(pkg), "--out", str(out), "--quiet", *force]) == 2
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and name in err and "no symdrive run wrote" in err, err
+            assert sorted(p.name for p in out.iterdir()) == [name]
+            assert (out / name).read_text() == '{"my": "quarterly numbers"}'
+
+
+def test_with_force_a_users_file_where_the_run_writes_is_neither_taken_as_done_nor_written_over(tmp_path, capsys):
+    pkg = write_package(tmp_path / "pkg")
+    out = tmp_path / "out"
+    (out / "render" / "front").mkdir(parents=True)
+    (out / "render" / "front" / "000000.png").write_text("my precious image")
+    assert main(["run", str(pkg), "--out", str(out), "--quiet", "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "render/front/000000.png is there and no symdrive run wrote it" in err, err
+    assert (out / "render" / "front" / "000000.png").read_text() == "my precious image"

@@ -22,7 +22,10 @@ def pool(tmp_path):
 
 
 def _traffic(capsys, *args):
-    rc = main(["traffic", *map(str, args)])
+    try:  # a value argparse refuses exits, one found after parsing returns
+        rc = main(["traffic", *map(str, args)])
+    except SystemExit as exc:
+        rc = exc.code
     out = capsys.readouterr()
     return rc, out.out, out.err
 
@@ -112,8 +115,8 @@ def test_speed_zero_gives_standing_traffic(tmp_path, pool, capsys):
 
 @pytest.mark.parametrize("args,message", [
     (["--density", 10, "--seconds", 1], "--seconds must cover the package's frames"),
-    (["--density", -1, "--seconds", 5], "--density must be >= 0"),
-    (["--density", 10, "--seconds", 5, "--speed", -3], "--speed must be >= 0"),
+    (["--density", -1, "--seconds", 5], "argument --density: must be a finite number, 0 or more"),
+    (["--density", 10, "--seconds", 5, "--speed", -3], "argument --speed: must be a finite number, 0 or more"),
 ])
 def test_bad_settings_are_refused(tmp_path, pool, capsys, args, message):
     pkg = write_package(tmp_path / "pkg", road=curved_road(length=80.0))
