@@ -258,10 +258,22 @@ def _camera_frame(scene, depsgraph, cam, bg_inv: Matrix, width: int, height: int
     )
 
 
-def _actor_pose(depsgraph, root, bg_inv: Matrix) -> scene_pkg.Pose | None:
-    """The asset frame's pose in the background frame; None while the actor is disabled in renders."""
+def _in_rendered_collection(scene, ob) -> bool:
+    """Whether a collection holding ``ob`` renders: one reached from the scene's through
+    collections none of which is disabled in renders or excluded from the view layer."""
+
+    def renders(layer, above: bool) -> bool:
+        here = above and not layer.exclude and not layer.collection.hide_render
+        return (here and ob.name in layer.collection.objects) or any(renders(c, here) for c in layer.children)
+
+    return renders(scene.view_layers[0].layer_collection, True)
+
+
+def _actor_pose(scene, depsgraph, root, bg_inv: Matrix) -> scene_pkg.Pose | None:
+    """The asset frame's pose in the background frame; None while the actor is disabled in
+    renders (itself, or every collection it is in)."""
     ev = root.evaluated_get(depsgraph)
-    if ev.hide_render:
+    if ev.hide_render or not _in_rendered_collection(scene, root):
         return None
     _check_rigid(root, ev.matrix_world)
     return scene_pkg.Pose.from_matrix(
@@ -301,7 +313,7 @@ def export_scene(scene: bpy.types.Scene, options: ExportOptions, progress: Progr
                     for cam in cameras:
                         cam_frames[cam].append(_camera_frame(scene, depsgraph, cam, bg_inv, width, height))
                     for a in actor_list:
-                        poses[a.root].append(_actor_pose(depsgraph, a.root, bg_inv))
+                        poses[a.root].append(_actor_pose(scene, depsgraph, a.root, bg_inv))
                     present = [a.root for a in actor_list if poses[a.root][-1] is not None]
                     if renderer and present:
                         _write_masks(work, renderer, depsgraph, cameras, present, i, mask_entries, id_maps)

@@ -137,3 +137,18 @@ def test_a_duplicated_vehicle_is_named_with_the_vehicle_it_copies(blender, tmp_p
     objs["cars"][1].symdrive.instance_id = objs["cars"][0].symdrive.instance_id
     with pytest.raises(RuntimeError, match=r"car_b.*: instance_id: instance id 1 is 'car_a'.s too"):
         blender.ops.symdrive.export_scene(directory=str(tmp_path / "pkg"))
+
+
+def test_a_vehicle_in_a_collection_disabled_in_renders_is_absent(blender, tmp_path):
+    objs = two_car_scene(blender, tmp_path / "assets", n_frames=1)
+    parked = blender.data.collections.new("Parked")
+    inner = blender.data.collections.new("Inner")
+    blender.context.scene.collection.children.link(parked)
+    parked.children.link(inner)
+    car = objs["cars"][0]
+    for c in list(car.users_collection):
+        c.objects.unlink(car)
+    inner.objects.link(car)
+    assert _export(blender, blender.context.scene, tmp_path / "on").actor("car_a").poses[0] is not None
+    parked.hide_render = True  # the parent's switch reaches the collection inside it
+    assert _export(blender, blender.context.scene, tmp_path / "off").actor("car_a").poses[0] is None
