@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from . import add_quiet_option, count_int, positive_int, positive_number
 
+MIN_SIDE = 8  # pixels: a rendered view smaller than this has no room for the episode video's inset
+
 
 def add_commands(sub) -> None:
     from . import add_external_assets_option
@@ -13,7 +15,7 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--agent", default="replay", help="replay, idm, cut-in, or MODULE:CLASS (default replay)")
     p.add_argument("--episodes", type=positive_int, default=1, help="episodes to run (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="episode i runs from seed S + i (default %(default)s)")
+    p.add_argument("--seed", type=count_int, default=0, help="episode i runs from seed S + i (default %(default)s)")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
     p.add_argument("--dt", type=positive_number, help="seconds per step (default: the package's frame interval)")
@@ -46,12 +48,15 @@ def _sim(args) -> int:
     if args.size:
         try:
             w, h = (int(v) for v in args.size.lower().split("x"))
-            assert w > 0 and h > 0
+            assert w >= MIN_SIDE and h >= MIN_SIDE
         except (ValueError, AssertionError):
-            raise InputError("--size", f"expected WxH with positive integers, got {args.size!r}") from None
+            raise InputError("--size", f"expected WxH, whole numbers of at least {MIN_SIDE} pixels (room for the "
+                             f"video's road inset), got {args.size!r}") from None
         size = (w, h)
-    if args.dt is not None and not args.dt > 0:
-        raise InputError("--dt", f"expected a positive number of seconds, got {args.dt}")
+    if args.vehicles is not None and args.traffic != "sumo":
+        raise InputError("--vehicles", "places SUMO vehicles: pass --traffic sumo with it")
+    if args.restore and args.render is False:
+        raise InputError("--restore", "restores rendered views: it does nothing with --no-render")
     given = {"dt": args.dt, "time_limit_s": args.time_limit, "image_size": size, "render": args.render,
              "traffic": args.traffic, "sumo_vehicles": args.vehicles, "action": args.action,
              "normalized_actions": args.normalized_actions, "restore": args.restore}

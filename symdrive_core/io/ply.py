@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -376,13 +377,14 @@ def fold_3d_filter(log_scales: np.ndarray, opacity_logits: np.ndarray,
 
 
 def _checked(path: Path, g: Gaussians, drop_invalid: bool) -> Gaussians:
-    """``g`` without non-finite splats, or an error naming how many there are."""
+    """``g`` without non-finite splats (said, as a warning), or an error naming how many there are."""
     ok = g.finite_mask()
     bad = int(len(g) - ok.sum())
     if bad:
         if not drop_invalid:
-            raise InputError(path, f"{bad} of {len(g)} splats have NaN or Inf values "
-                                   "(use --drop-invalid to drop them)", "element vertex")
+            raise InputError(path, f"{bad} of {len(g)} splats have NaN or Inf values (`symdrive info "
+                                   "--drop-invalid` describes the others)", "element vertex")
+        warnings.warn(f"{path}: dropped {bad} of {len(g)} splats with NaN or Inf values", stacklevel=3)
         g = g.subset(ok)
     return g
 

@@ -193,6 +193,24 @@ def depth_loss(info: dict, alpha: torch.Tensor, target: torch.Tensor | None) -> 
     return (1.0 / pred[valid].clamp_min(1e-3) - 1.0 / target[valid]).abs().mean()
 
 
+# What a resumed fit must share with the one it resumes: options that shape the fit from its start.
+RESUME_FIELDS = ("sh_degree", "decompose", "seed", "actor_max_gaussians", "driving_view_repeat", "exposure",
+                 "densify.max_gaussians")
+
+
+def _same_fit(saved: dict, now: dict, path: Path) -> None:
+    def get(d: dict, key: str):
+        for part in key.split("."):
+            d = d.get(part) if isinstance(d, dict) else None
+        return d
+
+    for key in RESUME_FIELDS:
+        if get(saved, key) != get(now, key):
+            raise InputError(path, f"the checkpoint was fitted with {key} = {get(saved, key)!r}, this run asks "
+                             f"{get(now, key)!r}: resume with the options it started with, or start again without "
+                             "--resume", "--resume")
+
+
 @dataclass
 class Checkpoint:
     """``gaussians.ply`` + ``state.safetensors`` (Adam moments, step counts, gradient stats)."""
@@ -218,15 +236,25 @@ class Checkpoint:
         return (self.folder / "gaussians.ply").exists() and (self.folder / "state.safetensors").exists()
 
     def load(self, cfg: ReconstructConfig, extent: float):
+        """The fit saved here, refused (naming the file) when it was made with other options than
+        ``cfg``'s or its two files are of different iterations (a run killed between them)."""
         from safetensors import safe_open
 
+        state = self.folder / "state.safetensors"
         g = read_splats(self.folder / "gaussians.ply")
         params = params_from_gaussians(g, cfg.sh_degree)
         opt = make_optimizer(params, cfg, extent)
-        with safe_open(str(self.folder / "state.safetensors"), "pt") as f:
+        with safe_open(str(state), "pt") as f:
             it = int(f.metadata()["iteration"])
+            _same_fit(json.loads(f.metadata()["config"]), asdict(cfg), state)
+            if it > cfg.iters:
+                raise InputError(state, f"the checkpoint is at iteration {it}, past this run's {cfg.iters}: resume "
+                                 "with --iters of at least that, or start again without --resume", "--iters")
             stats = GradStats(len(g))
             stats.sum, stats.count = f.get_tensor("stats.sum"), f.get_tensor("stats.count")
+            if len(stats.sum) != len(g):
+                raise InputError(state, f"holds the state of {len(stats.sum)} Gaussians, gaussians.ply {len(g)}: a run "
+                                 "killed between the two writes; reconstruct again without --resume", "checkpoint")
             keys = set(f.keys())
             for group in opt.param_groups:
                 name = group["name"]

@@ -46,7 +46,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .. import conventions
-from ..scene import Manifest, load_manifest
+from ..scene import Manifest, ManifestError, load_manifest
 from ..scene.ground_truth import truth_camera
 from . import episode as ep
 from . import spaces as sim_spaces
@@ -75,6 +75,10 @@ class SymDriveEnv(gym.Env):
         self.config = cfg = config or SimConfig()
         self.manifest = m = package if isinstance(package, Manifest) else load_manifest(
             package, allow_external=allow_external_assets)
+        if cfg.restore and cfg.render and not m.background_splats:  # found now, not when the ego first leaves the path
+            raise ManifestError(m.path or m.root, "sim's restore needs the package's background splats (views off "
+                                "the recorded path are rendered from them): 'symdrive reconstruct' fits them",
+                                "background.splats")
         times = np.array([f.timestamp for f in m.frames], dtype=np.float64)
         self.times = times
         self.dt = float(cfg.dt if cfg.dt is not None else (np.median(np.diff(times)) if len(times) > 1 else 0.1))

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..io.atomic import write_text_atomic
 from . import episode as ep
 from .config import SimConfig
@@ -65,7 +66,7 @@ def run_episode(env, agent_cls, seed: int, *, video: str | Path | None = None, f
         obs, _, term, trunc, info = env.step(action)
         if env.end_reason != ep.INVALID_ACTION:
             grab(obs)
-    scores = score_episode(env.history, env.dt, env.route.length, env.end_reason)
+    scores = score_episode(env.history, env.dt, env.route.length - env.config.route_end_margin_m, env.end_reason)
     record = {"seed": seed, "steps": env.steps, "seconds": round(env.steps * env.dt, 6),
               "end_reason": env.end_reason, "end_detail": env.end_detail, "scores": scores,
               "timing_s": {**{k: round(v, 4) for k, v in env.timing.items()}, "agent": round(agent_time, 4)}}
@@ -99,10 +100,12 @@ def run(package, agent: str, episodes: int, seed: int, out: str | Path, config: 
     from .env import SymDriveEnv
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "names a file, not a folder", "--out")
     config = config or SimConfig()
     agent_cls = load_agent(agent)
-    env = SymDriveEnv(package, config, allow_external_assets=allow_external_assets)
+    env = SymDriveEnv(package, config, allow_external_assets=allow_external_assets)  # the package checked first
+    out.mkdir(parents=True, exist_ok=True)
     records = []
     try:
         for i in tqdm(range(episodes), desc="sim", unit="episode", disable=not progress):

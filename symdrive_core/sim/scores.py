@@ -64,22 +64,27 @@ def comfortable(values: dict) -> bool:
     return all(values[k] >= b if k.startswith("min") else values[k] <= b for k, b in COMFORT.items())
 
 
-def score_episode(history: list[dict], dt: float, route_length: float, end_reason: str | None) -> dict:
-    """Every sub-score, the combined PDM score and the measurements behind them."""
+def score_episode(history: list[dict], dt: float, goal: float, end_reason: str | None) -> dict:
+    """Every sub-score, the combined PDM score and the measurements behind them. ``goal``: the
+    progress along the route at which the episode ends as driven to its end (route completion 1).
+    An episode its agent ended (an error, an action outside the space) drove nothing it chose to:
+    PDM score 0."""
     values = comfort_values(history, dt)
     ttcs = [h["ttc"] for h in history if h.get("ttc") is not None]
     min_ttc = min(ttcs) if ttcs else None
     progress = max(h["progress"] for h in history) - history[0]["progress"]
+    to_go = goal - history[0]["progress"]
     s = {
         "no_collision": 0.0 if end_reason == ep.COLLISION else 1.0,
         "drivable_area_compliance": 0.0 if end_reason == ep.OFF_ROAD else 1.0,
         "ttc": 0.0 if (min_ttc is not None and min_ttc < TTC_THRESHOLD_S) else 1.0,
         "comfort": 1.0 if comfortable(values) else 0.0,
-        "route_completion": float(np.clip(progress / route_length, 0.0, 1.0)) if route_length > 0 else 1.0,
+        "route_completion": float(np.clip(progress / to_go, 0.0, 1.0)) if to_go > 0 else 1.0,
     }
     weighted = (WEIGHTS["ttc"] * s["ttc"] + WEIGHTS["comfort"] * s["comfort"]
                 + WEIGHTS["route_completion"] * s["route_completion"]) / sum(WEIGHTS.values())
-    s["pdm_score"] = s["no_collision"] * s["drivable_area_compliance"] * weighted
+    failed = end_reason in (ep.AGENT_ERROR, ep.INVALID_ACTION)
+    s["pdm_score"] = 0.0 if failed else s["no_collision"] * s["drivable_area_compliance"] * weighted
     s["min_ttc_s"] = min_ttc
     s["progress_m"] = float(progress)
     s["comfort_values"] = values

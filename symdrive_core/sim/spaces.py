@@ -63,11 +63,14 @@ def from_physical(action, cfg: SimConfig) -> np.ndarray:
 def check_action(action, space: spaces.Box, names: tuple[str, ...]) -> str | None:
     """None when ``space`` contains ``action``; else what is wrong with it, in words."""
     try:
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        raw = np.asarray(action)
     except (TypeError, ValueError):
         return f"not {len(names)} numbers: {action!r}"
+    if raw.dtype.kind not in "biuf":  # as the space has it: objects and strings are no numbers
+        return f"not {len(names)} numbers: {action!r}"
+    a = raw.astype(np.float64)
     if a.shape != space.shape:
-        return f"expected [{', '.join(names)}], got {a.size} values"
+        return f"expected [{', '.join(names)}] (shape {list(space.shape)}), got shape {list(a.shape)}"
     if not np.all(np.isfinite(a)):
         return f"not finite: {a.tolist()}"
     with np.errstate(over="ignore"):  # 1e300 becomes inf in float32 and is refused below

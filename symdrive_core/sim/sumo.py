@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import tempfile
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -92,6 +93,9 @@ class SumoTraffic:
                         continue
                     slots.append((ed, ln, float(p)))
         n = min(self.config.sumo_vehicles, len(slots))
+        if n < self.config.sumo_vehicles:
+            warnings.warn(f"SUMO traffic: {n} of {self.config.sumo_vehicles} vehicles placed: the road has room for "
+                          f"{len(slots)} ({SLOT_M:g} m apart, none within {EGO_CLEAR_M:g} m of the ego)", stacklevel=2)
         self.types = {}
         chosen = rng.choice(len(slots), size=n, replace=False) if n else []
         kinds = rng.integers(len(self.templates), size=n)

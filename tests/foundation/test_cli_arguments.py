@@ -88,6 +88,7 @@ def test_every_frames_option_takes_the_one_syntax(base, option):
     (["import", "kitti", "S", "--out", "OUT", "--camera-height", "-1.6"], "import kitti",
      "argument --camera-height: must be a finite number above 0"),
     (["sim", PKG, "--dt", "0", "--out", "OUT"], "sim", "argument --dt: must be a finite number above 0"),
+    (["sim", PKG, "--seed", "-5", "--out", "OUT"], "sim", "argument --seed: must be at least 0"),
     (["traffic", PKG, "--density", "-1", "--seconds", "1"], "traffic", "argument --density: must be a finite"),
     # plain argparse: a wrong type, a missing required option, a choice not offered
     (["reconstruct", PKG, "--iters", "many"], "reconstruct", "argument --iters"),
@@ -120,7 +121,10 @@ def test_a_bad_argument_exits_2_naming_the_command(tmp_path, capsys, argv, comma
     (["render", PKG, "--camera", "front", "--frames", "0:999", "--out", "OUT"], "render", "--frames"),
     (["render", PKG, "--camera", "nope", "--out", "OUT"], "render", "no camera named 'nope'"),
     (["sim", PKG, "--size", "0x3", "--out", "OUT"], "sim", "--size"),
+    (["sim", PKG, "--size", "7x40", "--out", "OUT"], "sim", "at least 8 pixels"),
     (["traffic", PKG, "--density", "1", "--seconds", "1", "--road", "bogus"], "traffic", "--road"),
+    (["sim", PKG, "--vehicles", "5", "--out", "OUT"], "sim", "--vehicles: places SUMO vehicles"),
+    (["sim", PKG, "--restore", "--no-render", "--out", "OUT"], "sim", "--restore: restores rendered views"),
 ])
 def test_a_bad_value_found_after_parsing_exits_2_naming_the_command(tmp_path, capsys, argv, command, says):
     argv = [str(tmp_path / "out") if a == "OUT" else a for a in argv]

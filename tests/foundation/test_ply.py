@@ -118,7 +118,8 @@ def test_nan_reported_and_droppable(tmp_path):
     write_splats(tmp_path / "n.ply", g)
     with pytest.raises(InputError, match="2 of 10 splats have NaN or Inf.*--drop-invalid"):
         read_splats(tmp_path / "n.ply")
-    assert len(read_splats(tmp_path / "n.ply", drop_invalid=True)) == 8
+    with pytest.warns(UserWarning, match="dropped 2 of 10 splats with NaN or Inf values"):
+        assert len(read_splats(tmp_path / "n.ply", drop_invalid=True)) == 8
 
 
 @pytest.mark.parametrize("content,message", [

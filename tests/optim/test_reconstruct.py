@@ -56,6 +56,25 @@ def test_resume_continues_from_the_checkpoint(synthetic_package, tmp_path):
     assert second.metrics["resumed_from"] == 60 and second.metrics["iterations"] == 80
 
 
+def test_a_resume_with_other_options_or_a_torn_checkpoint_is_refused_naming_it(synthetic_package, tmp_path):
+    from symdrive_core.errors import InputError
+    from symdrive_core.io.ply import write_splats
+
+    root, _ = synthetic_package
+    m = load_manifest(root)
+    reconstruct(m, tmp_path, _cfg(iters=60, checkpoint_every=30), progress=False)
+    for cfg, says in ((_cfg(iters=40), "iteration 60, past this run's 40"),
+                      (_cfg(iters=80, sh_degree=0), "sh_degree = 1, this run asks 0"),
+                      (_cfg(iters=80, decompose=False), "decompose = True, this run asks False"),
+                      (_cfg(iters=80, seed=3), "seed = 0, this run asks 3")):
+        with pytest.raises(InputError, match=says):
+            reconstruct(m, tmp_path, cfg, resume=True, progress=False)
+    g = read_splats(tmp_path / "checkpoint" / "gaussians.ply")
+    write_splats(tmp_path / "checkpoint" / "gaussians.ply", g.subset(np.arange(len(g) - 1)))  # a kill between writes
+    with pytest.raises(InputError, match=f"state of {len(g)} Gaussians, gaussians.ply {len(g) - 1}"):
+        reconstruct(m, tmp_path, _cfg(iters=80), resume=True, progress=False)
+
+
 def test_depth_loss_runs_and_keeps_quality(synthetic_package, tmp_path):
     root, _ = synthetic_package
     m = load_manifest(root)

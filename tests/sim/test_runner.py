@@ -65,8 +65,18 @@ def test_pdm_score_definition():
     hist[3]["ttc"] = 0.6
     assert score_episode(hist, 0.1, 2.0, None)["pdm_score"] == pytest.approx((2 + 5 * 0.5) / 12)
     assert score_episode(hist, 0.1, 2.0, "collision")["pdm_score"] == 0.0
+    for failed in ("agent_error", "invalid_action"):  # an agent that fails drove nothing it chose to
+        assert score_episode(hist, 0.1, 2.0, failed)["pdm_score"] == 0.0
     hist[5]["v"] = 2.0  # a 10 m/s^2 jolt
     assert score_episode(hist, 0.1, 2.0, None)["comfort"] == 0.0
+    start = [dict(h, progress=h["progress"] + 0.5) for h in hist]  # from 0.5 m along the route to a 1.5 m goal
+    assert score_episode(start, 0.1, 1.5, "route_end")["route_completion"] == pytest.approx(1.0)
+
+
+def test_replaying_the_recorded_drive_completes_its_route(tmp_path):
+    report = run(DEMO, "replay", 1, 0, tmp_path, SimConfig(render=False), video=False, progress=False)
+    (episode,) = report["episodes"]
+    assert episode["end_reason"] == "route_end" and episode["scores"]["route_completion"] == pytest.approx(1.0, abs=0.02)
 
 
 def test_cli(tmp_path, capsys):
@@ -78,3 +88,20 @@ def test_cli(tmp_path, capsys):
     assert report["agent"] == "cut-in" and len(report["episodes"]) == 2
     assert main(["sim", str(DEMO), "--agent", "nosuch", "--out", str(tmp_path / "p")]) == 2
     assert main(["sim", str(DEMO), "--size", "0x3", "--out", str(tmp_path / "p")]) == 2
+
+
+def test_bad_input_is_refused_before_any_output_is_made(tmp_path, capsys):
+    from tests.conftest import manifest_dict
+
+    bare = tmp_path / "bare"  # poses only: no splats to render views off the path from
+    bare.mkdir()
+    (bare / "manifest.json").write_text(json.dumps(manifest_dict(n_frames=5, actors=(), background=None)))
+    (tmp_path / "a_file").write_text("mine")
+    for package, extra, says in ((bare, ["--restore"], "background.splats: sim's restore needs"),
+                                 (DEMO, [], "a_file: --out: names a file"),
+                                 (tmp_path / "missing", [], "missing")):
+        out = tmp_path / "a_file" if says.startswith("a_file") else tmp_path / "out" / "deep"
+        assert main(["sim", str(package), "--out", str(out), "--quiet", "--no-video", "--size", "16x9", *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and says in err, err
+        assert not (tmp_path / "out").exists() and (tmp_path / "a_file").read_text() == "mine"

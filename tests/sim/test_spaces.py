@@ -65,11 +65,13 @@ def test_samples_are_valid_and_the_next_float32_outside_is_not():
 
 @pytest.mark.parametrize("bad,why", [([np.nan, 0.0], "not finite"), ([0.0, np.inf], "not finite"),
                                      ([1e300, 0.0], "acceleration"), ([0.0], "expected"), ("fast", "not 2 numbers"),
-                                     ([0.0, 0.6 + 1e-6], "steering")])
+                                     ([0.0, 0.6 + 1e-6], "steering"), (np.zeros((2, 1)), "got shape [2, 1]"),
+                                     ([[0.0, 0.0]], "got shape [1, 2]"), (np.array([0.0, 0.0], object), "not 2 numbers")])
 def test_actions_outside_the_space_are_refused(bad, why):
     space = action_space(SimConfig())
     problem = check_action(bad, space, NAMES["accel_steer"])
     assert problem is not None and why in problem
+    assert not space.contains(np.asarray(bad) if not isinstance(bad, str) else bad)  # refused exactly as the space does
 
 
 def test_normalized_actions_map_to_the_limits():
