@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
-from .outputs import REPORT, RUN_RECORDS, STATE, OutputError, OutputTree
+from .outputs import RUN_RECORDS, STATE, OutputError, OutputTree
 
 
 @dataclass
@@ -51,8 +51,9 @@ class RunState:
             tree.remove_temporaries()
             return cls(tree.path(STATE), inputs_hash, list(raw.get("completed", [])),
                        dict(raw.get("seconds", {})), dict(raw.get("metrics", {})))
+        for record in RUN_RECORDS:  # of other inputs, and a run's (checked above), claimed or not (older runs)
+            (tree.root / record).unlink(missing_ok=True)
         tree.remove_written()
-        (tree.root / REPORT).unlink(missing_ok=True)  # the report of other inputs (a run's: checked above)
         state = cls(tree.path(STATE), inputs_hash)
         state.save()
         return state

@@ -105,3 +105,15 @@ def test_with_force_a_users_file_where_the_run_writes_is_neither_taken_as_done_n
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "render/front/000000.png is there and no symdrive run wrote it" in err, err
     assert (out / "render" / "front" / "000000.png").read_text() == "my precious image"
+
+
+def test_a_folder_an_older_run_wrote_without_claiming_its_records_runs_again(tmp_path):
+    pkg = write_package(tmp_path / "pkg")
+    out = tmp_path / "out"
+    assert main(["run", str(pkg), "--out", str(out), "--quiet"]) == 0
+    journal = out / JOURNAL
+    journal.write_text("".join(line + "\n" for line in journal.read_text().splitlines()
+                               if line not in ("state.json", "report.json")))  # as runs before they were claimed
+    write_splats(tmp_path / "pkg" / "car_0.ply", random_gaussians(60, 1, 99, spread=0.8))  # other inputs
+    assert main(["run", str(pkg), "--out", str(out), "--quiet"]) == 0
+    assert "state.json" in journal.read_text().splitlines() and (out / "report.json").exists()
