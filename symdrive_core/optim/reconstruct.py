@@ -199,13 +199,16 @@ RESUME_FIELDS = ("sh_degree", "decompose", "seed", "actor_max_gaussians", "drivi
 
 
 def _same_fit(saved: dict, now: dict, path: Path) -> None:
+    """A field the checkpoint's code did not have yet is not held against it."""
+    missing = object()
+
     def get(d: dict, key: str):
         for part in key.split("."):
-            d = d.get(part) if isinstance(d, dict) else None
+            d = d.get(part, missing) if isinstance(d, dict) else missing
         return d
 
     for key in RESUME_FIELDS:
-        if get(saved, key) != get(now, key):
+        if get(saved, key) is not missing and get(saved, key) != get(now, key):
             raise InputError(path, f"the checkpoint was fitted with {key} = {get(saved, key)!r}, this run asks "
                              f"{get(now, key)!r}: resume with the options it started with, or start again without "
                              "--resume", "--resume")
