@@ -58,15 +58,12 @@ def add_commands(sub) -> None:
 
 def _insert(args) -> int:
     from ..insertion.render_actor import insert_actor
+    from ..pipeline.outputs import output_folder
     from ..scene import check_files, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     check_files(manifest)
-    out = Path(args.out) if args.out else manifest.output_dir() / "insert"
-    if out.exists() and not out.is_dir():
-        from ..errors import InputError
-
-        raise InputError(out, "names a file, not a folder", "--out")
+    out = output_folder(args.out if args.out else manifest.output_dir() / "insert")
     n = insert_actor(manifest, args.actor, out, background=args.gaussians, flip=args.flip_forward,
                      from_mesh=args.from_mesh, progress=not args.quiet, **given(args, n_samples="mesh_gaussians"))
     print(f"wrote {n} frame(s) of {args.actor} to {out}")

@@ -31,9 +31,17 @@ def finite_numbers(text: str, count: int | tuple[int, ...], path: Path, where: s
     if len(v) not in counts:
         raise InputError(path, f"expected {expected} numbers, got {len(v)}", where)
     if not np.isfinite(v).all():
-        raise InputError(path, f"number {int(np.flatnonzero(~np.isfinite(v))[0]) + 1} is {v[~np.isfinite(v)][0]}, "
-                         "not a finite number", where)
+        i = int(np.flatnonzero(~np.isfinite(v))[0])
+        raise InputError(path, f"number {i + 1} is {v[i]}, not a finite number", where)
     return v
+
+
+def check_increasing(times: list[float], frames: list[int], path: Path) -> None:
+    """Each frame's time after the one before it (``frames``: their numbers, frame n at line n + 1
+    of ``path``), else an :class:`InputError` naming the line."""
+    for fa, a, fb, b in zip(frames, times, frames[1:], times[1:]):
+        if b <= a:
+            raise InputError(path, f"frame {fb}'s time {b:g} s is not after frame {fa}'s ({a:g} s)", f"line {fb + 1}")
 
 
 def rigid_transform(values: np.ndarray, path: Path, where: str) -> np.ndarray:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .calib_text import finite_numbers, labelled_lines
+from .calib_text import check_increasing, finite_numbers, labelled_lines
 from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
 from .kitti_calib import camera_offset, package_intrinsics, projection
 from .package import Source
@@ -99,10 +99,7 @@ def _times(path: Path) -> list[float] | None:
     if not path.is_file():
         return None
     times = [float(finite_numbers(line, 1, path, f"line {i + 1}")[0]) for i, line in enumerate(_read_lines(path, "times"))]
-    for i in range(1, len(times)):
-        if times[i] <= times[i - 1]:
-            raise InputError(path, f"frame {i}'s time {times[i]:g} s is not after frame {i - 1}'s ({times[i - 1]:g} s)",
-                             f"line {i + 1}")
+    check_increasing(times, list(range(len(times))), path)
     return times
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .calib_text import check_increasing
 from .frames import View
 
 
@@ -101,9 +102,7 @@ def _frame_times(path: Path, names: list[str]) -> tuple[list[float], str] | None
     clocks, lines = read
     s0, f0 = clocks[0]
     times = [float(s - s0) + (f - f0) for s, f in clocks]
-    for name, a, b in zip(names[1:], times, times[1:]):
-        if b <= a:
-            raise InputError(path, f"frame {name}'s time is not after the frame before it", f"line {int(name) + 1}")
+    check_increasing(times, [int(name) for name in names], path)
     return times, lines[int(names[0])].strip()
 
 

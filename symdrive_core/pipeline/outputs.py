@@ -39,13 +39,19 @@ class OutputError(SymDriveError):
     """The output folder cannot be used as asked (a path leaving it, files it does not own)."""
 
 
+def output_folder(out: str | os.PathLike) -> Path:
+    """``out`` as a command's output folder: one that is there or not yet; a file is refused."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"{out}: --out names a file, not a folder")
+    return out
+
+
 class OutputTree:
     """Paths inside one output folder, each recorded as written by runs in this folder."""
 
     def __init__(self, root: str | os.PathLike):
-        root = Path(root)
-        if root.exists() and not root.is_dir():
-            raise OutputError(f"{root}: --out names a file, not a folder")
+        root = output_folder(root)
         self.root = root
         self.real_root = root.resolve()  # links on the way resolved once: every check compares to it
         self._claimed: set[str] | None = None

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
 from ..io.atomic import write_text_atomic
+from ..pipeline.outputs import output_folder
 from . import episode as ep
 from .config import SimConfig
 from .scores import score_episode
@@ -99,9 +99,7 @@ def run(package, agent: str, episodes: int, seed: int, out: str | Path, config: 
     from .agents import load_agent
     from .env import SymDriveEnv
 
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "names a file, not a folder", "--out")
+    out = output_folder(out)
     config = config or SimConfig()
     agent_cls = load_agent(agent)
     env = SymDriveEnv(package, config, allow_external_assets=allow_external_assets)  # the package checked first

@@ -15,7 +15,7 @@ from tests.addon.scenes import add_camera, two_car_scene
 pytestmark = pytest.mark.blender
 
 
-def _export(bpy, scene, out, **kw):
+def _export(scene, out, **kw):
     return export.export_scene(scene, export.ExportOptions(out=out, write_masks=kw.pop("masks", False), **kw))
 
 
@@ -28,7 +28,7 @@ def test_a_scene_other_than_the_windows_exports_its_own_motion(blender, tmp_path
     blender.ops.wm.save_as_mainfile(filepath=str(blend))
     blender.ops.wm.open_mainfile(filepath=str(blend))
     assert blender.context.scene.name == "Other"
-    m = _export(blender, blender.data.scenes["Street"], tmp_path / "pkg")
+    m = _export(blender.data.scenes["Street"], tmp_path / "pkg")
     xs = [f.camera_to_world[0, 3] for f in m.cameras[0].frames]
     np.testing.assert_allclose(np.diff(xs), np.diff(xs)[0], atol=1e-6)  # steady, as keyed
     assert abs(xs[2] - xs[0]) > 0.5  # the camera's 0.3 m a frame, not one frame three times
@@ -42,7 +42,7 @@ def test_camera_names_that_clean_alike_get_their_own_mask_files(blender, tmp_pat
     other = add_camera(blender, "Cam_1")
     other.location = objs["camera"].location
     other.rotation_euler = (objs["camera"].rotation_euler[0], 0.0, 1.57)  # looking sideways
-    m = _export(blender, blender.context.scene, tmp_path / "pkg", masks=True)
+    m = _export(blender.context.scene, tmp_path / "pkg", masks=True)
     folders = {c: {e.amodal.rsplit("/", 1)[0] for e in m.masks if e.camera == c} for c in ("Cam 1", "Cam_1")}
     assert folders["Cam 1"].isdisjoint(folders["Cam_1"]) and all(folders.values())
     assert len({i.path for i in m.id_maps}) == len(m.id_maps) == 2
@@ -51,12 +51,12 @@ def test_camera_names_that_clean_alike_get_their_own_mask_files(blender, tmp_pat
 def test_a_reexport_copying_assets_keeps_each_cars_own_splats(blender, tmp_path):
     two_car_scene(blender, tmp_path / "assets", n_frames=1)
     out = tmp_path / "pkg"
-    first = _export(blender, blender.context.scene, out, copy_assets=True)
+    first = _export(blender.context.scene, out, copy_assets=True)
     before = {a.id: read_splats(first.resolve(a.splats)).means.copy() for a in first.actors}
     mesh, splats = write_car(tmp_path / "assets" / "car_c", "car_c", seed=5)
     blender.context.scene.cursor.location = (15.0, -2.0, 0.0)
     blender.ops.symdrive.import_vehicle(filepath=str(mesh), splat_filepath=str(splats))
-    again = _export(blender, blender.context.scene, out, copy_assets=True)
+    again = _export(blender.context.scene, out, copy_assets=True)
     paths = [a.splats for a in again.actors]
     assert len(set(paths)) == 3
     for a in again.actors:
@@ -71,7 +71,7 @@ def test_a_vehicles_own_camera_and_light_are_not_the_streets(blender, tmp_path):
     sun = blender.data.objects.new("StudioSun", blender.data.lights.new("StudioSun", "SUN"))
     blender.context.scene.collection.objects.link(sun)
     sun.parent = objs["cars"][0]
-    m = _export(blender, blender.context.scene, tmp_path / "pkg")
+    m = _export(blender.context.scene, tmp_path / "pkg")
     assert [c.name for c in m.cameras] == ["front"] and m.effects.sun_direction is None
 
 
@@ -79,14 +79,14 @@ def test_a_mirrored_camera_and_a_moving_background_are_refused_naming_them(blend
     objs = two_car_scene(blender, tmp_path / "assets", n_frames=2)
     objs["camera"].scale = (-1.0, 1.0, 1.0)
     with pytest.raises(Exception, match="front: scale: mirrored by a negative scale"):
-        _export(blender, blender.context.scene, tmp_path / "a")
+        _export(blender.context.scene, tmp_path / "a")
     objs["camera"].scale = (1.0, 1.0, 1.0)
     bg = objs["background"]
     bg.keyframe_insert("location", frame=1)
     bg.location.x += 2.0
     bg.keyframe_insert("location", frame=2)
     with pytest.raises(Exception, match="background: matrix_world: the background object moves"):
-        _export(blender, blender.context.scene, tmp_path / "b")
+        _export(blender.context.scene, tmp_path / "b")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
@@ -123,13 +123,12 @@ def test_an_empty_splat_file_is_refused_at_import(blender, tmp_path):
 
 
 def test_a_vehicle_with_mesh_and_splats_ships_its_mesh_in_its_own_frame(blender, tmp_path):
-    objs = two_car_scene(blender, tmp_path / "assets", n_frames=1)
-    m = _export(blender, blender.context.scene, tmp_path / "pkg", copy_assets=True)
+    two_car_scene(blender, tmp_path / "assets", n_frames=1)
+    m = _export(blender.context.scene, tmp_path / "pkg", copy_assets=True)
     for a in m.actors:
         assert a.mesh == f"assets/{a.id}/mesh.glb"
         verts = read_mesh(m.resolve(a.mesh)).verts
         np.testing.assert_allclose(np.ptp(verts, axis=0), [a.wlh[1], a.wlh[0], a.wlh[2]], rtol=0.02)
-    assert len(objs["cars"]) == 2
 
 
 def test_a_duplicated_vehicle_is_named_with_the_vehicle_it_copies(blender, tmp_path):
@@ -149,6 +148,6 @@ def test_a_vehicle_in_a_collection_disabled_in_renders_is_absent(blender, tmp_pa
     for c in list(car.users_collection):
         c.objects.unlink(car)
     inner.objects.link(car)
-    assert _export(blender, blender.context.scene, tmp_path / "on").actor("car_a").poses[0] is not None
+    assert _export(blender.context.scene, tmp_path / "on").actor("car_a").poses[0] is not None
     parked.hide_render = True  # the parent's switch reaches the collection inside it
-    assert _export(blender, blender.context.scene, tmp_path / "off").actor("car_a").poses[0] is None
+    assert _export(blender.context.scene, tmp_path / "off").actor("car_a").poses[0] is None

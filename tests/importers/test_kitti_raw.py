@@ -331,6 +331,14 @@ def test_oxts_times_short_of_the_frames(bad, tmp_path, capsys):
     refused(bad, tmp_path, capsys, "oxts/timestamps.txt", "no time for frame 0000000005", "line 6")
 
 
+def test_camera_times_that_do_not_increase_are_refused_naming_the_line(bad, tmp_path, capsys):
+    stamps = bad / "image_02" / "timestamps.txt"
+    lines = stamps.read_text().splitlines(keepends=True)
+    lines[4] = lines[3]  # frame 4 at frame 3's instant
+    stamps.write_text("".join(lines))
+    refused(bad, tmp_path, capsys, "image_02/timestamps.txt", "line 5", "frame 4's time", "is not after frame 3's")
+
+
 def test_missing_oxts_line(bad, tmp_path, capsys):
     (bad / "oxts" / "data" / "0000000003.txt").write_text("\n")
     refused(bad, tmp_path, capsys, "0000000003.txt", "line 1", "expected one line")

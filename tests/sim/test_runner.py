@@ -98,7 +98,7 @@ def test_bad_input_is_refused_before_any_output_is_made(tmp_path, capsys):
     (bare / "manifest.json").write_text(json.dumps(manifest_dict(n_frames=5, actors=(), background=None)))
     (tmp_path / "a_file").write_text("mine")
     for package, extra, says in ((bare, ["--restore"], "background.splats: sim's restore needs"),
-                                 (DEMO, [], "a_file: --out: names a file"),
+                                 (DEMO, [], "a_file: --out names a file"),
                                  (tmp_path / "missing", [], "missing")):
         out = tmp_path / "a_file" if says.startswith("a_file") else tmp_path / "out" / "deep"
         assert main(["sim", str(package), "--out", str(out), "--quiet", "--no-video", "--size", "16x9", *extra]) == 2
