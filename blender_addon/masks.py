@@ -80,6 +80,9 @@ class MaskRenderer:
         return self
 
     def __exit__(self, *exc) -> None:
+        # Cycles' persistent data keeps a depsgraph of this scene in the render engine; freed with
+        # the scene still there (turning it off frees it), so no later render reuses a stale one.
+        self.scene.render.use_persistent_data = False
         for _, proxy in self.proxies:
             bpy.data.objects.remove(proxy, do_unlink=True)
         for coll in self.collections.values():
