@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import asdict, dataclass, field
 
 from ..diffusion.config import SAMPLERS, SamplerConfig
+
+ACTIONS = ("accel_steer", "waypoint")
+TRAFFIC = ("replay", "sumo")
 
 
 @dataclass
@@ -69,7 +74,53 @@ class SimConfig:
     sumo_timeout_s: float = 300.0
     # Score thresholds (NAVSIM / nuPlan values; see scores.py).
     ttc_horizon_s: float = 1.0
+    # The look-ahead is checked this often (or every step, when steps are shorter): a coarse --dt
+    # would otherwise step over a car ahead.
+    ttc_step_s: float = 0.1
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Refuse values no drive can run with when the config is built, from Python as from the
+        command line: a negative step or a zero-length car would otherwise surface as NaN scores
+        or a stalled episode far from the field that caused it."""
+        positive = ["time_limit_factor", "wheelbase_m", "camera_height_m", "max_accel", "max_brake", "max_steer",
+                    "max_speed", "waypoint_speed_gain", "waypoint_reach_m", "corridor_half_width_m",
+                    "restore_offset_round_m", "restore_ar_step_m", "sumo_speed", "sumo_timeout_s", "ttc_horizon_s",
+                    "ttc_step_s"]
+        at_least_zero = ["offroad_margin_m", "route_end_margin_m", "restore_threshold_m"]
+        for name in ("dt", "time_limit_s"):
+            if getattr(self, name) is not None:
+                positive.append(name)
+        for name in positive:
+            _check_number(name, getattr(self, name), 0.0, inclusive=False)
+        for name in at_least_zero:
+            _check_number(name, getattr(self, name), 0.0, inclusive=True)
+        _check_number("camera_ahead_m", self.camera_ahead_m, -math.inf, inclusive=False)
+        if not self.max_steer < math.pi / 2:
+            raise ValueError(f"max_steer: expected below pi/2 rad (a wheel turned 90 degrees), got {self.max_steer}")
+        for name in ("ego_wlh", "default_actor_wlh"):
+            value = getattr(self, name)
+            if len(value) != 3:
+                raise ValueError(f"{name}: expected (width, length, height), got {value!r}")
+            for v in value:
+                _check_number(name, v, 0.0, inclusive=False)
+        if self.image_size is not None and (
+            len(self.image_size) != 2 or any(not isinstance(v, numbers.Integral) or v < 1 for v in self.image_size)
+        ):
+            raise ValueError(f"image_size: expected (width, height) in whole pixels, got {self.image_size!r}")
+        if not isinstance(self.sumo_vehicles, numbers.Integral) or self.sumo_vehicles < 0:
+            raise ValueError(f"sumo_vehicles: expected a count of at least 0, got {self.sumo_vehicles!r}")
+        for name, allowed in (("action", ACTIONS), ("traffic", TRAFFIC)):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name}: expected one of {', '.join(allowed)}, got {getattr(self, name)!r}")
 
     def to_json(self) -> dict:
         return asdict(self)
+
+
+def _check_number(name: str, value, low: float, *, inclusive: bool) -> None:
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value) and (
+        value >= low if inclusive else value > low)
+    if not ok:
+        bound = "" if low == -math.inf else f" {'at least' if inclusive else 'above'} {low:g}"
+        raise ValueError(f"{name}: expected a finite number{bound}, got {value!r}")

@@ -284,9 +284,9 @@ class SymDriveEnv(gym.Env):
         if e.v < 0.05 or len(centres) == 0:
             return None
         vel = np.array([s.velocity for s in self.actors])
-        n = int(round(self.config.ttc_horizon_s / self.dt))
-        for k in range(0, n + 1):
-            tau = k * self.dt
+        step = min(self.dt, self.config.ttc_step_s)
+        for k in range(int(np.floor(self.config.ttc_horizon_s / step + 1e-9)) + 1):
+            tau = k * step
             rect = ep.ego_footprint(e.x + e.v * tau * np.cos(e.yaw), e.y + e.v * tau * np.sin(e.yaw), e.yaw,
                                     self.wlh)
             hit, _ = ep.collisions(rect, centres + vel * tau, yaws, wlhs)

@@ -11,8 +11,8 @@ the sub-metrics are nuPlan's closed-loop metrics):
   vehicle and no fault is attributed, so any collision scores 0).
 * DAC, drivable-area compliance: 1, or 0 once a corner of the ego's box leaves the road.
 * TTC, time to collision: 1, or 0 when at some step the ego, driving on at constant speed and
-  heading, would overlap a vehicle moving on at its current velocity within 1 s (a standing ego
-  is not counted).
+  heading, would overlap a vehicle moving on at its current velocity within 1 s, looked at every
+  0.1 s whatever the step (a standing ego is not counted).
 * C, comfort: 1 when the ego's motion stays within nuPlan's comfort bounds (longitudinal
   acceleration in [-4.05, 2.40] m/s^2, |lateral acceleration| <= 4.89 m/s^2, |longitudinal jerk|
   <= 4.13 m/s^3, |jerk| <= 8.37 m/s^3, |yaw rate| <= 0.95 rad/s, |yaw acceleration| <= 1.93

@@ -114,6 +114,21 @@ def test_drive_into_parked_car_collides_at_the_right_step(demo):
     assert rec["scores"]["min_ttc_s"] == 0.0
 
 
+
+def test_time_to_collision_is_found_between_coarse_steps(demo):
+    """With 2 s steps the 1 s look-ahead still checks every 0.1 s: a parked car the ego reaches
+    0.42 s ahead is found at 0.5 s (one look at 0 s alone would see nothing)."""
+    env = SymDriveEnv(demo, STATE_ONLY)
+    x0, y0, yaw0 = env.recorded_xy[0, 0], env.recorded_xy[0, 1], env.recorded_yaw[0]
+    v0 = float(env.recorded_speed[0])
+    ahead = np.array([np.cos(yaw0), np.sin(yaw0)])
+    car = only_actors(demo, {"insert_2"}).actor("insert_2")
+    distance = 0.42 * v0 + 0.5 * env.wlh[1] + 0.5 * float(car.wlh[1])
+    park(demo, "insert_2", *(np.array([x0, y0]) + distance * ahead), yaw0)
+    env = SymDriveEnv(demo, SimConfig(render=False, dt=2.0))
+    env.reset(seed=0)
+    assert env.history[0]["min_gap"] > 0 and env.history[0]["ttc"] == pytest.approx(0.5)
+
 def _corners_overlap(a, b):
     """Independent overlap test for two convex quads: a corner inside the other, or crossing edges."""
     def cross2(u, v):  # written out: numpy 2 refuses np.cross on 2-vectors

@@ -168,3 +168,19 @@ def test_gymnasium_finds_the_environment_in_a_fresh_process():
                              capture_output=True, text=True, timeout=120)
         assert out.returncode == 0, out.stderr[-2000:]
         assert out.stdout.strip().endswith("SymDriveEnv (6,)"), out.stdout
+
+
+@pytest.mark.parametrize("field, value", [
+    ("dt", -0.1), ("dt", float("nan")), ("time_limit_s", 0.0), ("ego_wlh", (1.8, 0.0, 1.5)),
+    ("ego_wlh", (1.8, 4.5)), ("max_steer", 1.6), ("max_speed", float("inf")), ("offroad_margin_m", -1.0),
+    ("image_size", (0, 90)), ("image_size", (160.5, 90)), ("sumo_vehicles", -1), ("action", "throttle"),
+    ("traffic", "carla"), ("camera_ahead_m", float("nan")),
+])
+def test_config_refuses_values_no_drive_runs_with(field, value):
+    with pytest.raises(ValueError, match=f"^{field}: "):
+        SimConfig(**{field: value})
+
+
+def test_config_takes_numpy_numbers_and_the_defaults():
+    cfg = SimConfig(dt=np.float64(0.05), image_size=(np.int64(160), np.int64(90)), sumo_vehicles=np.int64(3))
+    assert cfg.dt == 0.05 and SimConfig().action == "accel_steer"
