@@ -18,8 +18,9 @@ import inspect
 import json
 import os
 import sys
+import warnings
 
-from ..errors import SymDriveError
+from ..errors import SymDriveError, one_line
 
 # Modules that add subcommands; each defines ``add_commands(subparsers)``.
 COMMAND_MODULES = [
@@ -60,7 +61,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.invocation = " ".join(["symdrive", *argv])  # recorded in outputs for reproduction
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _warning_line(args.command)
+            return int(args.func(args) or 0)
     except BrokenPipeError:  # `symdrive plan | head`: the reader left; nothing more to say
         with contextlib.suppress(OSError, ValueError, AttributeError):  # no flush error at exit either
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -71,6 +74,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"symdrive {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _warning_line(command: str):
+    """Library warnings as one line each, like errors (not Python's file, line and source echo)."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"symdrive {command}: warning: {one_line(str(message))}", file=sys.stderr)
+
+    return show
 
 
 def add_external_assets_option(p: argparse.ArgumentParser) -> None:

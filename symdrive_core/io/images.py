@@ -57,7 +57,8 @@ def image_size(path: str | os.PathLike, field: str | None = None) -> tuple[int, 
 
 
 def read_image(path: str | os.PathLike, *, channels: int | None = None) -> np.ndarray:
-    """Read an image as float32 [H, W, C]; ``channels`` keeps the first C (or repeats grey)."""
+    """Read an image as float32 [H, W, C]; ``channels`` keeps the first C (or repeats grey, of a
+    grey image with or without alpha: alpha comes associated, as of RGBA, so grey is over black)."""
     oiio = _oiio()
     path = Path(path)
     if not path.exists():
@@ -73,8 +74,8 @@ def read_image(path: str | os.PathLike, *, channels: int | None = None) -> np.nd
     if img.ndim == 2:
         img = img[:, :, None]
     if channels is not None:
-        if img.shape[2] == 1 and channels > 1:
-            img = np.repeat(img, channels, axis=2)
+        if img.shape[2] in (1, 2) and channels > img.shape[2]:
+            img = np.repeat(img[:, :, :1], channels, axis=2)
         elif img.shape[2] < channels:
             raise InputError(path, f"expected {channels} channels, file has {img.shape[2]}")
         img = img[:, :, :channels]

@@ -134,14 +134,18 @@ def dome_radius(views: list[View]) -> float:
 
 
 def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 2048) -> np.ndarray:
-    """Root mean squared distance to the k nearest neighbours (the 3DGS initial scale)."""
-    p = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
-    out = torch.empty(len(p))
+    """Root mean squared distance to the k nearest neighbours (the 3DGS initial scale).
+
+    Centred and in float64: the distances come from |a|^2 + |b|^2 - 2ab, which in float32 cancels
+    to zero for neighbours centimetres apart a kilometre from the origin (UTM, a long drive)."""
+    points = np.asarray(points, dtype=np.float64)
+    p = torch.from_numpy(np.ascontiguousarray(points - points.mean(0) if len(points) else points))
+    out = torch.empty(len(p), dtype=torch.float64)
     for s in range(0, len(p), chunk):
         d2 = torch.cdist(p[s:s + chunk], p).pow_(2)
         vals = torch.topk(d2, min(k + 1, len(p)), largest=False).values[:, 1:]
         out[s:s + chunk] = vals.mean(1).sqrt()
-    return out.clamp_min(1e-4).numpy()
+    return out.clamp_min(1e-4).numpy().astype(np.float32)
 
 
 def initial_gaussians(manifest: Manifest, views: list[View], cfg: ReconstructConfig,
@@ -316,7 +320,7 @@ class Part:
         if self.refine is not None:
             return Layer(g, *self.refine.pose(frame), self.instance_id)
         p = self.poses[frame]
-        return Layer(g, torch.as_tensor(p.R, dtype=torch.float32), torch.as_tensor(p.translation, dtype=torch.float32),
+        return Layer(g, torch.as_tensor(p.R, dtype=torch.float32), torch.as_tensor(p.translation, dtype=torch.float64),
                      self.instance_id)
 
     def gaussians(self) -> Gaussians:

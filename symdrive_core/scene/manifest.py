@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,9 @@ ACTOR_KINDS = ("existing", "inserted")
 FOCAL_RANGE = (1e-2, 1e7)  # fx, fy in pixels
 PRINCIPAL_MAX = 1e7  # |cx|, |cy|, |skew| in pixels
 COORD_MAX = 1e7  # |translation| in metres: 10 000 km holds UTM and Earth-centred coordinates
+# Beyond this distance from the origin float32, in which splat PLYs store positions, steps by more
+# than a centimetre: such a package loads, with a warning to move its origin near the drive.
+FLOAT32_NEAR_M = 2.0 ** 17
 WLH_MAX = 1000.0  # metres
 OFFSET_MAX = 1000.0  # lateral offsets, metres
 ID_MAX = 65535  # instance ids: id maps are 16-bit
@@ -646,6 +650,7 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
     gt = rd.obj(d.get("ground_truth", {}), "ground_truth")
     _check_ground_truth_refs(rd, gt, cam_names, nf)
     bg = rd.obj(d.get("background", {}), "background")
+    _warn_if_far(path, cameras)
     return Manifest(
         name=name, frames=frames, cameras=cameras, actors=actors,
         background_splats=rd.ref(bg.get("splats"), "background.splats"),
@@ -653,6 +658,15 @@ def parse_manifest(data: Any, path: Path, *, allow_external: bool = False) -> Ma
         masks=masks, id_maps=id_maps, effects=effects,
         output=rd.output(d.get("output", "output")), ground_truth=gt, source=_source(rd, d),
         root=path.parent, path=path, allow_external=allow_external)
+
+
+def _warn_if_far(path: Path, cameras: list[Camera]) -> None:
+    far = max((float(np.abs(cf.camera_to_world[:3, 3]).max()) for c in cameras for cf in c.frames), default=0.0)
+    if far > FLOAT32_NEAR_M:
+        step = float(np.spacing(np.float32(far)))
+        warnings.warn(f"{path}: cameras up to {far:.0f} m from the origin, where the splats' float32 positions step "
+                      f"by {100 * step:.0f} cm: renders and fits lose detail; move the origin near the drive (the "
+                      "importers' local frame does)", stacklevel=3)
 
 
 def load_manifest(path: str | os.PathLike, *, allow_external: bool = False) -> Manifest:

@@ -349,7 +349,7 @@ class SymDriveEnv(gym.Env):
             asset = s.asset or s.id
             if asset in r.actors:
                 layers.append(Layer(r.actors[asset], torch.as_tensor(s.pose.R, dtype=torch.float32),
-                                    torch.as_tensor(s.pose.translation, dtype=torch.float32),
+                                    torch.as_tensor(s.pose.translation, dtype=torch.float64),
                                     by_id[asset].instance_id if asset in by_id else 0))
         black = torch.zeros(3, dtype=torch.float32, device=r.device)
         if restored is not None and not layers:

@@ -29,7 +29,7 @@ from .tensors import GaussianTensors
 class Layer:
     gaussians: GaussianTensors
     rotation: torch.Tensor | None = None  # [3, 3] local -> world; None = identity
-    translation: torch.Tensor | None = None  # [3]; None = zero
+    translation: torch.Tensor | None = None  # [3], float64 (world coordinates may be UTM); None = zero
     actor_id: int = 0  # 0 = background (no instance channel)
 
 

@@ -62,7 +62,7 @@ def render_scene(background: GaussianTensors | None, placed: list, view: CameraV
     layers = [] if background is None else [Layer(background)]
     for g, pose, instance_id in placed:
         layers.append(Layer(g, torch.as_tensor(pose.R, dtype=torch.float32, device=device),
-                            torch.as_tensor(pose.translation, dtype=torch.float32, device=device), instance_id))
+                            torch.as_tensor(pose.translation, dtype=torch.float64, device=device), instance_id))
     return render_layers(layers, torch.as_tensor(view.world_to_camera, dtype=torch.float64, device=device),
                          torch.as_tensor(view.K, dtype=torch.float32, device=device), view.width, view.height,
                          background=background_color, antialiased=antialiased)

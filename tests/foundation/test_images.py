@@ -50,6 +50,16 @@ def test_channels_option_and_missing_file(tmp_path):
         read_image(tmp_path / "nope.png")
 
 
+
+def test_grey_with_alpha_reads_as_grey_like_rgba(tmp_path):
+    """A grey + alpha PNG (what some tools write for a monochrome camera) is a recorded image like
+    an RGBA one: opaque pixels keep their grey, in all three channels."""
+    grey = np.array([[0.2, 0.6], [1.0, 0.0]])
+    write_image(tmp_path / "la.png", np.stack([grey, np.ones_like(grey)], -1))
+    rgb = read_image(tmp_path / "la.png", channels=3)
+    np.testing.assert_allclose(rgb, np.repeat(grey[:, :, None], 3, 2), atol=0.5 / 255)
+    assert read_image(tmp_path / "la.png").shape == (2, 2, 2)
+
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
     target = tmp_path / "out.txt"
     target.write_text("old")

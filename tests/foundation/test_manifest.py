@@ -90,6 +90,31 @@ def test_check_files_names_missing_file(make_package):
         check_files(m)
 
 
+
+def _moved(d: dict, offset) -> dict:
+    for cf in d["cameras"][0]["frames"]:
+        c2w = np.array(cf["camera_to_world"])
+        c2w[:3, 3] += offset
+        cf["camera_to_world"], cf["world_to_camera"] = c2w.tolist(), np.linalg.inv(c2w).tolist()
+    return d
+
+
+def test_cameras_where_float32_steps_by_centimetres_load_with_a_warning(make_package, capsys, recwarn):
+    """UTM coordinates are valid, but splat positions are float32 (half a metre at 4.5e6 m): the
+    package loads and says so once, as one line on the command line; 1e5 m stays silent."""
+    path = make_package()
+    d = json.loads(path.read_text())
+    path.write_text(json.dumps(_moved(copy.deepcopy(d), [1e5, -1e5, 0.0])))
+    load_manifest(path)
+    assert not [w for w in recwarn if "origin" in str(w.message)]
+    path.write_text(json.dumps(_moved(copy.deepcopy(d), [5e5, 4.5e6, 0.0])))
+    with pytest.warns(UserWarning, match=r"cameras up to 4500000 m from the origin, where the splats' float32 "
+                                         r"positions step by 50 cm"):
+        load_manifest(path)
+    assert main(["validate", str(path), "--no-files"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("symdrive validate: warning: ") and "move the origin" in err[0]
+
 def test_cli_validate_exit_codes(make_package, capsys):
     path = make_package()
     assert main(["validate", str(path)]) == 0

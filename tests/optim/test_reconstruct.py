@@ -10,6 +10,7 @@ from symdrive_core.optim.reconstruct import (
     Checkpoint,
     ReconstructConfig,
     initial_gaussians,
+    knn_scale,
     load_views,
     reconstruct,
     scene_extent,
@@ -114,3 +115,14 @@ def test_fit_needs_initial_gaussians_or_a_checkpoint(synthetic_package, tmp_path
     views = load_views(m, split_frames(m)[0])
     with pytest.raises(ValueError, match="no initial Gaussians"):
         fit(views, None, _cfg(), checkpoint=Checkpoint(tmp_path / "none"), resume=True, progress=False)
+
+
+@pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (1.0e3, -2.0e3, 0.0), (5.0e5, 4.5e6, 30.0)])
+def test_initial_scales_do_not_depend_on_where_the_origin_is(origin):
+    """Points 4 to 9 cm apart, at the origin, a kilometre away and at UTM coordinates: the scales
+    match a float64 brute-force oracle (float32 distances cancelled to the 1e-4 floor there)."""
+    rng = np.random.default_rng(0)
+    local = np.stack(np.meshgrid(*(np.arange(6) * 0.07,) * 3), -1).reshape(-1, 3) + rng.uniform(-0.015, 0.015, (216, 3))
+    d2 = ((local[:, None] - local[None]) ** 2).sum(-1)
+    oracle = np.sqrt(np.sort(d2, axis=1)[:, 1:4].mean(1))
+    np.testing.assert_allclose(knn_scale(local + np.array(origin)), oracle, rtol=1e-5)

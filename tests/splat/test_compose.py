@@ -121,6 +121,24 @@ def test_far_from_origin_matches_origin():
     torch.testing.assert_close(a["rgb"], b["rgb"], atol=1e-4, rtol=0)
 
 
+
+def test_an_actor_at_utm_coordinates_renders_where_its_pose_puts_it():
+    """render_scene keeps a package pose's translation in float64: at 4.5e6 m float32 steps are
+    half a metre, which moved a car by pixels."""
+    from symdrive_core.rotations import quat_from_yaw
+    from symdrive_core.scene import Pose
+    from symdrive_core.scene.camera import CameraView
+    from symdrive_core.splat.render import render_scene
+
+    _, K, _, car = _setup(torch.float32)
+    images = []
+    for origin in (np.zeros(3), np.array([5.0e5 + 0.3, 4.5e6 + 0.2, 0.0])):
+        V = look_at(origin + (0, 0, 1.5), origin + (10, 0, 1.0))
+        pose = Pose(origin + (8.03, 1.01, 0.8), quat_from_yaw(0.6))
+        images.append(render_scene(None, [(car, pose, 1)], CameraView(V, K.numpy(), W, H))["rgb"])
+    assert float(images[0].max()) > 0.2
+    torch.testing.assert_close(images[0], images[1], atol=2e-3, rtol=0)
+
 def test_rotate_quats_composes_rotations_and_passes_gradients():
     """q_R (x) q for a batch of unnormalised quaternions, against the rotation matrices, with gradients."""
     R = _yaw(0.9) @ torch.tensor([[1, 0, 0], [0, 0, -1], [0, 1, 0.0]], dtype=torch.float64)
