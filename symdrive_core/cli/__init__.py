@@ -121,6 +121,25 @@ def positive_number(value: str) -> float:
     return x
 
 
+def share_above_zero(value: str) -> float:
+    """A share above 0 and at most 1 (the highest noise level trained on)."""
+    x = unit_fraction(value)
+    if x == 0:
+        raise argparse.ArgumentTypeError(f"must be above 0 and at most 1, got {value}")
+    return x
+
+
+SEED_MAX = 2**63 - 1  # torch and numpy seeds are 64-bit
+
+
+def seed_int(value: str) -> int:
+    """``--seed``: a whole number from 0 to 2^63 - 1, what every random generator here takes."""
+    n = _int_at_least(value, 0)
+    if n > SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be at most {SEED_MAX} (a 64-bit seed), got {n}")
+    return n
+
+
 def number_at_least_zero(value: str) -> float:
     """A finite number, 0 or more (0 meaning none or off where the option says so)."""
     return _float_between(value, 0.0, sys.float_info.max, "a number", "a finite number, 0 or more")
@@ -236,6 +255,10 @@ def distances_arg(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected comma-separated distances in metres, got {text!r}") from None
     if not values or not all(0 < v < float("inf") for v in values):
         raise argparse.ArgumentTypeError(f"expected positive distances in metres, got {text!r}")
+    cm = [round(v * 100) for v in values]  # outputs are named by the centimetre (+1.50)
+    if len(set(cm)) != len(cm):
+        raise argparse.ArgumentTypeError(f"expected distinct distances to the centimetre (outputs are named by it), "
+                                         f"got {text!r}")
     return values
 
 

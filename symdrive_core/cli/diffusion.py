@@ -7,6 +7,7 @@ that need no diffusion model never pay for (or depend on) them.
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -21,6 +22,7 @@ from ..diffusion.config import (
     TrainConfig,
 )
 from ..diffusion.defaults import EVALUATED_METHODS
+from ..pipeline.outputs import output_file, output_folder
 from ..pipeline.stages import StageOptions, chain_step
 from . import (
     add_frames_option,
@@ -32,11 +34,14 @@ from . import (
     device_arg,
     distances_arg,
     given,
-    number_at_least_zero,
     positive_int,
     positive_number,
+    seed_int,
+    share_above_zero,
     unit_fraction,
 )
+
+MIN_CHAIN_STEP_M = 0.01  # a finer chain step is thousands of restorer passes per view
 
 
 def _floats(text: str) -> list[float]:
@@ -58,9 +63,27 @@ def _names(text: str) -> list[str]:
 
 def _signed_offsets(text: str) -> list[float]:
     values = _floats(text)
-    if any(v == 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected non-zero signed offsets in metres, got {text!r}")
+    if not values or any(v == 0 or not math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite non-zero signed offsets in metres, got {text!r}")
     return values
+
+
+def _chain_step_arg(value: str) -> float:
+    """``--step``: 0 (one jump, single view) or at least a centimetre."""
+    try:
+        x = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of metres, got {value!r}") from None
+    if not (x == 0 or MIN_CHAIN_STEP_M <= x < math.inf):
+        raise argparse.ArgumentTypeError(f"must be 0 (single view) or a finite step of at least "
+                                         f"{MIN_CHAIN_STEP_M} m, got {value}")
+    return x
+
+
+def _network_output(value: str) -> str:
+    if value not in ("skip", "v"):
+        raise argparse.ArgumentTypeError(f"expected skip or v, got {value!r}")
+    return value
 
 
 def _train_default(name: str) -> str:
@@ -98,7 +121,7 @@ def add_commands(sub) -> None:
     )
     p.add_argument("--cycle-iters", type=positive_int,
                    help=f"iterations of each cycle reconstruction (default {default_of(CycleConfig, 'iters')})")
-    p.add_argument("--cycle-max-gaussians", type=int,
+    p.add_argument("--cycle-max-gaussians", type=positive_int,
                    help=f"densification cap of each cycle reconstruction "
                         f"(default {default_of(CycleConfig, 'max_gaussians')})")
     p.add_argument("--warps", action="store_true",
@@ -122,21 +145,21 @@ def add_commands(sub) -> None:
     for flag, kind, text in (
         ("--batch", positive_int, f"crops per iteration ({_train_default('batch')})"),
         ("--crop", positive_int, f"square crop size in pixels ({_train_default('crop')})"),
-        ("--lr", float, f"peak learning rate ({_train_default('lr')})"),
-        ("--ema", float, f"EMA decay of the shipped weights (default {default_of(TrainConfig, 'ema')})"),
+        ("--lr", positive_number, f"peak learning rate ({_train_default('lr')})"),
+        ("--ema", unit_fraction, f"EMA decay of the shipped weights (default {default_of(TrainConfig, 'ema')})"),
         ("--width", positive_int, f"UNet base width (default {default_of(TrainConfig, 'width')})"),
-        ("--seed", int, f"seed of every batch and noise draw ({_train_default('seed')})"),
+        ("--seed", seed_int, f"seed of every batch and noise draw ({_train_default('seed')})"),
         ("--threads", positive_int, f"torch threads ({_train_default('threads')})"),
         ("--checkpoint-every", positive_int,
          f"iterations between checkpoints ({_train_default('checkpoint_every')})"),
-        ("--t-max", float, f"train on noise levels t <= T_MAX (default {default_of(TrainConfig, 't_max')}; "
+        ("--t-max", share_above_zero, f"train on noise levels t <= T_MAX (default {default_of(TrainConfig, 't_max')}; "
                            f"sampling from N_start {paper.n_start} of {paper.steps} starts at "
                            f"{1 - paper.n_start / paper.steps:g})"),
-        ("--full-fraction", float,
+        ("--full-fraction", unit_fraction,
          f"share of each batch drawn on all of t in [0, 1] (default {default_of(TrainConfig, 'full_fraction')})"),
-        ("--output", str, "network output: skip (correction on the condition mean) or v "
+        ("--output", _network_output, "network output: skip (correction on the condition mean) or v "
                           f"(default {default_of(TrainConfig, 'output')})"),
-        ("--degraded-fraction", float, "share of each batch started from a degraded render, when the pairs have "
+        ("--degraded-fraction", unit_fraction, "share of each batch started from a degraded render, when the pairs have "
                                        f"cycles ({_train_default('degraded_fraction')})"),
         ("--init", str, "restorer weights to continue from (default: a fresh network)"),
     ):
@@ -183,14 +206,14 @@ def add_commands(sub) -> None:
     add_offsets_option(p, default=[0.5, 1.0, 1.5, 2.0, 3.0],
                        help="the views to restore (with --evaluate, the views --refine trains on; scoring "
                             "covers every offset with ground truth)")
-    p.add_argument("--step", type=number_at_least_zero,
+    p.add_argument("--step", type=_chain_step_arg,
                    help=f"chain step d in metres (0 = single-view; default {default_of(StageOptions, 'ar_step')}, "
                         f"{default_of(StageOptions, 'guided_ar_step')} with --geometry-guided)")
     add_frames_option(p, help="recorded frames (default: all; with --evaluate, those with lateral ground truth)")
     p.add_argument("--steps", type=positive_int, help=f"sampler steps (default: {_per_backend('steps')})")
     p.add_argument("--n-start", type=count_int,
                    help=f"start step of the noise initialisation (default: {_per_backend('n_start')})")
-    p.add_argument("--seed", type=int, help=f"sampler noise seed (default {default_of(SamplerConfig, 'seed')})")
+    p.add_argument("--seed", type=seed_int, help=f"sampler noise seed (default {default_of(SamplerConfig, 'seed')})")
     p.add_argument("--samples", type=positive_int,
                    help="average this many samples per view: the posterior mean, higher PSNR for up to that many "
                         f"times the work (default: {_per_backend('samples')})")
@@ -278,7 +301,9 @@ def _make_pairs(args) -> int:
     if args.sensor and not args.cycle:
         raise InputError("make-pairs", "needs --cycle: every pair with a start needs the cycle reconstructions' "
                          "degraded starts", "--sensor")
+    output_file(args.out)
     manifest, ply = _reconstruction(args)
+    _check_frames(manifest, args)
     cycle = cycle_config(CycleConfig(**given(args, iters="cycle_iters", max_gaussians="cycle_max_gaussians")))
     out = make_pairs(
         manifest, read_splats(ply, drop_invalid=True), args.offsets, args.out, frames=args.frames,
@@ -294,6 +319,7 @@ def _train(args) -> int:
     from ..diffusion.train import TrainConfig, train_restorer
     from . import print_json
 
+    output_folder(args.out)
     if args.backend == "flux":
         return _train_flux(args)
     flux_only = ("flux_transformer", "flux_vae", "prompt", "rank", "lora_alpha", "lora_targets", "grad_accum",
@@ -355,6 +381,7 @@ def _train_flux(args) -> int:
 def _flux_prompt(args) -> int:
     from ..diffusion.flux_prompt import DEFAULT_PROMPT, write_prompt_file
 
+    output_file(args.out)
     out = write_prompt_file(args.text_encoders, args.out, args.text or DEFAULT_PROMPT, device=args.device,
                             **given(args, "max_length"))
     print(f"wrote {out}")
@@ -375,6 +402,7 @@ def _restore(args) -> int:
     sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", "noise_free", "strength",
                                          "keep_warp", max_memory_gib="max_memory"))
     steps, n_start = sampler.steps, sampler.n_start
+    output_folder(args.out)
     if n_start >= steps:
         raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "
                             f"below --steps {steps}: the sampler starts at step n_start of steps")
@@ -410,12 +438,13 @@ def _restore(args) -> int:
 
 
 def _check_frames(manifest, args) -> None:
-    """--frames / --refine-frames must name frames of the camera that is shifted sideways."""
+    """--frames / --refine-frames must name frames of the camera that is shifted sideways (every
+    camera has the package's frames)."""
     from ..errors import InputError
     from ..scene.ground_truth import truth_camera
 
     cam = truth_camera(manifest)
-    for option, frames in (("--frames", args.frames), ("--refine-frames", args.refine_frames)):
+    for option, frames in (("--frames", args.frames), ("--refine-frames", getattr(args, "refine_frames", None))):
         bad = [f for f in frames or () if not 0 <= f < len(cam.frames)]
         if bad:
             raise InputError(manifest.path or manifest.root, f"{option} {bad[0]} is not a frame of camera "

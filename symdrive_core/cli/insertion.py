@@ -75,10 +75,13 @@ def _insert_eval(args) -> int:
     from ..insertion.config import InsertionConfig
     from ..insertion.features import load_extractor
     from ..io.ply import read_splats
+    from ..pipeline.outputs import output_folder
     from ..scene import check_files, load_manifest
     from ..scene.ground_truth import require_truth
     from . import print_json, write_json
 
+    if args.assets_out:
+        output_folder(args.assets_out, "--assets-out")
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     check_files(manifest)
     require_truth(manifest, "insertion", "insert-eval needs it; `symdrive insert` renders a vehicle without scoring")

@@ -16,6 +16,7 @@ from . import (
     given,
     loss_weight,
     positive_int,
+    seed_int,
     unit_fraction,
 )
 
@@ -77,7 +78,7 @@ def add_commands(sub) -> None:
                         f"(default {default_of(ReconstructConfig, 'densify_until_fraction')})")
     p.add_argument("--max-init-points", type=positive_int, help="point-cloud subset to start from "
                    f"(default {default_of(ReconstructConfig, 'max_init_points')})")
-    p.add_argument("--seed", type=int,
+    p.add_argument("--seed", type=seed_int,
                    help=f"random seed of the reconstruction (default {default_of(ReconstructConfig, 'seed')})")
     p.add_argument("--static", action="store_true",
                    help="one static scene: do not fit the recorded vehicles (existing actors with a box) in their own "

@@ -170,9 +170,11 @@ def _batch(args) -> int:
 def _accuracy_time(args) -> int:
     from ..bench.accuracy_time import format_table, run_settings, write_outputs
     from ..bench.knobs import WHY_DEFAULTS, package_settings
+    from ..pipeline.outputs import output_folder
     from ..scene import load_manifest
     from ..world.demo import DEMO_PACKAGE
 
+    output_folder(args.out)
     manifest = load_manifest(args.package or DEMO_PACKAGE, allow_external=args.allow_external_assets)
     settings, skipped = package_settings(manifest, quick=args.quick)
     for group, why in skipped.items():

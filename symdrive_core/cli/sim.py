@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from . import add_quiet_option, count_int, positive_int, positive_number
+from . import add_quiet_option, count_int, positive_int, positive_number, seed_int
 
 MIN_SIDE = 8  # pixels: a rendered view smaller than this has no room for the episode video's inset
 
@@ -15,7 +15,7 @@ def add_commands(sub) -> None:
     p.add_argument("package", help="scene package directory or its manifest.json")
     p.add_argument("--agent", default="replay", help="replay, idm, cut-in, or MODULE:CLASS (default replay)")
     p.add_argument("--episodes", type=positive_int, default=1, help="episodes to run (default %(default)s)")
-    p.add_argument("--seed", type=count_int, default=0, help="episode i runs from seed S + i (default %(default)s)")
+    p.add_argument("--seed", type=seed_int, default=0, help="episode i runs from seed S + i (default %(default)s)")
     p.add_argument("--out", required=True, help="output folder (report.json, episode_NNN.mp4)")
     p.add_argument("--size", help="render size WxH instead of the cameras' own, e.g. 256x144")
     p.add_argument("--dt", type=positive_number, help="seconds per step (default: the package's frame interval)")

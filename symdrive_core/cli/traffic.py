@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from ..scene.road import road_from_spec
 from ..traffic.simulate import TrafficOptions
-from . import add_quiet_option, default_of, given, number_at_least_zero, positive_int, positive_number
+from . import (
+    add_quiet_option,
+    default_of,
+    given,
+    number_at_least_zero,
+    positive_int,
+    positive_number,
+    seed_int,
+)
 
 
 def add_commands(sub) -> None:
@@ -16,7 +24,7 @@ def add_commands(sub) -> None:
     p.add_argument("--density", type=number_at_least_zero, required=True, help="vehicles per km per lane (0 = no traffic)")
     p.add_argument("--seconds", type=positive_number, required=True,
                    help="simulated seconds; the frames are the last part of the run, the rest is warm-up")
-    p.add_argument("--seed", type=int,
+    p.add_argument("--seed", type=seed_int,
                    help=f"random seed of the demand and of SUMO (default {default_of(TrafficOptions, 'seed')})")
     p.add_argument("--speed", type=number_at_least_zero,
                    help=f"speed limit in m/s, 0 = standing (default {default_of(TrafficOptions, 'speed')})")

@@ -177,6 +177,27 @@ def file_sha256(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
+def _check_shapes(path: Path, data: dict) -> None:
+    """Images as make-pairs writes them: [N, H, W, 3] uint8, one size throughout, one per pair
+    (and per listed frame for degraded starts and warps)."""
+    first = data["left"]
+    for key in ("left", "target", "right", "degraded", "warp", "sensor_left", "sensor_target", "sensor_right",
+                "sensor_start", "sensor_warp"):
+        if key not in data:
+            continue
+        a = data[key]
+        if a.dtype != np.uint8 or a.ndim != 4 or a.shape[3] != 3 or a.shape[1:] != first.shape[1:]:
+            raise InputError(path, f"expected [N, {first.shape[1]}, {first.shape[2]}, 3] 8-bit images like 'left', "
+                                   f"got {a.dtype} {list(a.shape)}", key)
+    n = len(first)
+    for key in ("target", "right", "offset", "frame"):
+        if key in data and len(data[key]) != n:
+            raise InputError(path, f"expected one per pair ({n}), got {len(data[key])}", key)
+    for key, of in (("degraded_frame", "degraded"), ("warp_frame", "warp"), ("warp_mask", "warp")):
+        if of in data and (key not in data or len(data[key]) != len(data[of])):
+            raise InputError(path, f"expected one per {of!r} image ({len(data[of])})", key)
+
+
 class PairSet:
     """The pairs of one file as float tensors [N, 3, H, W] in [0, 1]; with ``holdout`` (recorded
     frames), only the pairs of the other frames, or with ``held_out`` only theirs (degraded starts
@@ -184,19 +205,16 @@ class PairSet:
     warps unread: an unguided restorer then starts from the cycle renders, as it was trained to."""
 
     def __init__(self, path: str | os.PathLike, holdout=(), *, held_out: bool = False, warps: bool = True):
-        from safetensors.numpy import load_file
+        from ..io.tensor_file import read_tensor_file
 
         path = Path(path)
         if not path.exists():
             raise InputError(path, "pairs file not found (write one with `symdrive make-pairs`)")
-        data = load_file(str(path))
-        from safetensors import safe_open
-
-        with safe_open(str(path), "np") as f:
-            self.metadata = dict(f.metadata() or {})
+        data, self.metadata = read_tensor_file(path, "a pairs file", "np")
         missing = {"left", "target", "right"} - set(data)
         if missing:
             raise InputError(path, f"not a pairs file: no {', '.join(sorted(missing))}")
+        _check_shapes(path, data)
 
         def images(key):
             return torch.from_numpy(data[key]).permute(0, 3, 1, 2).float().div_(255.0)

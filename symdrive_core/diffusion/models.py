@@ -89,21 +89,26 @@ def save_builtin(path: str | os.PathLike, net: UNet, meta: dict | None = None, *
 
 
 def load_builtin(path: str | os.PathLike = DEFAULT_WEIGHTS) -> BuiltinRestorer:
-    from safetensors import safe_open
+    from ..io.tensor_file import read_tensor_file
 
     path = Path(path)
     if not path.exists():
         raise InputError(path, "restorer weights not found (train them with `symdrive train-restorer`)")
-    with safe_open(str(path), "pt") as f:
-        meta = f.metadata() or {}
-        if "config" not in meta:
-            raise InputError(path, "not a restorer checkpoint: no config in its metadata")
-        net = UNet(UNetConfig.from_json(json.loads(meta["config"])))
-        state = {k: f.get_tensor(k).float() for k in f.keys()}  # noqa: SIM118 (not a dict)
+    tensors, meta = read_tensor_file(path, "restorer weights")
+    if "config" not in meta:
+        raise InputError(path, "not a restorer checkpoint: no config in its metadata")
     try:
-        net.load_state_dict(state)
+        net = UNet(UNetConfig.from_json(json.loads(meta["config"])))
+    except (TypeError, ValueError, KeyError) as exc:  # a training checkpoint's config, say
+        raise InputError(path, f"not restorer weights: its config is not a network's ({exc}); a training "
+                               "checkpoint's weights are written beside it by `symdrive train-restorer`") from None
+    if bad := [k for k, v in tensors.items() if v.is_floating_point() and not bool(torch.isfinite(v).all())]:
+        raise InputError(path, f"{len(bad)} of {len(tensors)} weight tensors hold NaN or infinity ({bad[0]}, ...): "
+                               "the training diverged; train again")
+    try:
+        net.load_state_dict({k: v.float() for k, v in tensors.items()})
     except RuntimeError as exc:
-        raise InputError(path, f"weights do not match their config: {exc}") from exc
+        raise InputError(path, f"weights do not match their config: {str(exc).splitlines()[0]}") from None
     recorded = _recorded(meta.get("meta"))
     return BuiltinRestorer(net.eval(), strength=_strength(path, recorded), keep_warp=_keep_warp(path, recorded))
 

@@ -77,15 +77,17 @@ def save_checkpoint(
 
 
 def load_checkpoint(path: Path, net: UNet, ema: UNet, opt: torch.optim.Adam) -> tuple[int, list[float]]:
-    from safetensors import safe_open
+    from ..io.tensor_file import read_tensor_file
 
-    with safe_open(str(path), "pt") as f:
-        meta = f.metadata()
-        t = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 (not a dict)
-    net.load_state_dict({k[6:]: v for k, v in t.items() if k.startswith("model.")})
-    ema.load_state_dict({k[4:]: v for k, v in t.items() if k.startswith("ema.")})
-    load_optimizer_tensors(opt, t)
-    return int(meta["step"]), json.loads(meta["losses"])
+    t, meta = read_tensor_file(path, "a training checkpoint")
+    try:
+        net.load_state_dict({k[6:]: v for k, v in t.items() if k.startswith("model.")})
+        ema.load_state_dict({k[4:]: v for k, v in t.items() if k.startswith("ema.")})
+        load_optimizer_tensors(opt, t)
+        return int(meta["step"]), json.loads(meta["losses"])
+    except (RuntimeError, KeyError, ValueError) as exc:
+        raise InputError(path, "a checkpoint of another network (its --width, --guide or --output differ from this "
+                               f"run's): {str(exc).splitlines()[0]}") from None
 
 
 def optimizer_tensors(opt: torch.optim.Optimizer) -> dict[str, torch.Tensor]:

@@ -39,11 +39,19 @@ class OutputError(SymDriveError):
     """The output folder cannot be used as asked (a path leaving it, files it does not own)."""
 
 
-def output_folder(out: str | os.PathLike) -> Path:
+def output_folder(out: str | os.PathLike, option: str = "--out") -> Path:
     """``out`` as a command's output folder: one that is there or not yet; a file is refused."""
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise OutputError(f"{out}: --out names a file, not a folder")
+        raise OutputError(f"{out}: {option} names a file, not a folder")
+    return out
+
+
+def output_file(out: str | os.PathLike) -> Path:
+    """``out`` as a command's output file: one that is there or not yet; a folder is refused."""
+    out = Path(out)
+    if out.is_dir():
+        raise OutputError(f"{out}: --out names a folder, not a file")
     return out
 
 

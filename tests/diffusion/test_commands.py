@@ -175,3 +175,46 @@ def test_restore_rejects_frames_the_camera_does_not_have(synthetic_package, tmp_
         assert main(["restore", str(root), "--gaussians", str(ply), "--out", str(out), *flags]) == 2
         assert f"{flags[-2]} {flags[-1].split(',')[-1]} is not a frame of camera 'front'" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("flags", [
+    ["--ema", "nan"], ["--ema", "2"], ["--lr", "nan"], ["--lr", "-1"], ["--t-max", "0"], ["--t-max", "-1"],
+    ["--full-fraction", "5"], ["--degraded-fraction", "nan"], ["--output", "foo"], ["--seed", "99999999999999999999"],
+])
+def test_train_restorer_refuses_values_that_train_nothing_usable(tmp_path, capsys, flags):
+    """NaN EMA trained a restorer of NaN weights that restored black views, exit 0."""
+    with pytest.raises(SystemExit) as exc:
+        main(["train-restorer", str(tmp_path / "p.safetensors"), "--out", str(tmp_path / "run"), *flags])
+    assert exc.value.code == 2 and f"argument {flags[0]}" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("flags, says", [
+    (["--step", "1e-300"], "at least 0.01 m"), (["--step", "inf"], "at least 0.01 m"),
+    (["--offsets", "1,1.004"], "distinct distances to the centimetre"), (["--seed", "-1"], "at least 0"),
+])
+def test_restore_refuses_steps_and_offsets_it_cannot_serve(tmp_path, capsys, flags, says):
+    """A 1e-300 m chain step grew memory without bound; offsets alike to the centimetre shared one folder."""
+    with pytest.raises(SystemExit) as exc:
+        main(["restore", str(tmp_path / "pkg"), "--out", str(tmp_path / "o"), *flags])
+    assert exc.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_outputs_of_the_wrong_kind_are_refused_before_any_work(synthetic_package, tmp_path, capsys):  # noqa: F811
+    root, truth = synthetic_package
+    ply = tmp_path / "recon.ply"
+    write_splats(ply, truth)
+    a_file, a_folder = tmp_path / "file", tmp_path / "folder"
+    a_file.write_text("mine")
+    a_folder.mkdir()
+    for argv, says in (
+        (["restore", str(root), "--out", str(a_file)], "--out names a file"),
+        (["make-pairs", str(root), "--out", str(a_folder)], "--out names a folder"),
+        (["make-pairs", str(root), "--gaussians", str(ply), "--out", str(tmp_path / "p.safetensors"), "--frames", "9"],
+         "--frames 9 is not a frame of camera 'front'"),
+        (["insert-eval", str(root), "--gaussians", "x.ply", "--assets-out", str(a_file)], "--assets-out names a file"),
+        (["bench", "accuracy-time", "--package", str(root), "--out", str(a_file)], "--out names a file"),
+    ):
+        assert main(argv) == 2
+        assert says in capsys.readouterr().err
+    assert a_file.read_text() == "mine" and not any(a_folder.iterdir()) and not (tmp_path / "p.safetensors").exists()

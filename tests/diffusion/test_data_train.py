@@ -83,6 +83,24 @@ def test_missing_or_wrong_pairs_file_names_the_problem(tmp_path):
         PairSet(tmp_path / "bad.safetensors")
 
 
+
+def test_broken_pairs_files_are_refused_naming_the_file_and_key(tmp_path):
+    """Each ended in a library traceback, or trained on misaligned crops."""
+    good = load_file(str(synthetic_pairs(tmp_path / "p.safetensors")))
+    truncated = tmp_path / "truncated.safetensors"
+    truncated.write_bytes((tmp_path / "p.safetensors").read_bytes()[:200])
+    with pytest.raises(InputError, match="truncated.safetensors: not readable as a pairs file"):
+        PairSet(truncated)
+    for key, value, says in (
+        ("left", good["left"][..., :1], "left: expected"),
+        ("right", good["right"][0], "right: expected"),
+        ("target", good["target"][:, ::2], "target: expected"),
+        ("target", np.concatenate([good["target"], good["target"]]), "target: expected one per pair"),
+    ):
+        save_file({**good, key: np.ascontiguousarray(value)}, str(tmp_path / "bad.safetensors"))
+        with pytest.raises(InputError, match=f"bad.safetensors: {says}"):
+            PairSet(tmp_path / "bad.safetensors")
+
 CFG = {
     "batch": 4,
     "crop": 16,
@@ -112,6 +130,31 @@ def test_resume_continues_exactly(tmp_path):
         and record["config"]["unet"]["width"] == 8
     )
 
+
+
+def test_weights_and_checkpoints_that_cannot_serve_are_refused_naming_the_file(tmp_path):
+    """NaN weights restored black views; a truncated file, a training checkpoint given as weights
+    and a resume of another width gave tracebacks."""
+    from symdrive_core.diffusion.models import save_builtin
+    from symdrive_core.diffusion.unet import UNet, UNetConfig
+
+    pairs = synthetic_pairs(tmp_path / "p.safetensors")
+    train_restorer(pairs, tmp_path / "run", TrainConfig(steps=3, **CFG), progress=False)
+    weights = tmp_path / "run" / "restorer.safetensors"
+    (tmp_path / "cut.safetensors").write_bytes(weights.read_bytes()[:300])
+    with pytest.raises(InputError, match="cut.safetensors: not readable as restorer weights"):
+        load_builtin(tmp_path / "cut.safetensors")
+    with pytest.raises(InputError, match="checkpoint.safetensors: not restorer weights"):
+        load_builtin(tmp_path / "run" / "checkpoint.safetensors")
+    net = UNet(UNetConfig(width=8, mults=(1, 2)))
+    with torch.no_grad():
+        net.out.weight.fill_(float("nan"))
+    save_builtin(tmp_path / "nan.safetensors", net)
+    with pytest.raises(InputError, match="nan.safetensors: 1 of .* hold NaN or infinity"):
+        load_builtin(tmp_path / "nan.safetensors")
+    with pytest.raises(InputError, match="checkpoint.safetensors: a checkpoint of another network"):
+        train_restorer(pairs, tmp_path / "run", TrainConfig(steps=6, **{**CFG, "width": 16}), resume=True,
+                       progress=False)
 
 def test_training_learns_the_pair_to_centre_mapping(tmp_path):
     pairs = synthetic_pairs(tmp_path / "p.safetensors", n=8)
