@@ -22,7 +22,7 @@ from ..diffusion.config import (
     TrainConfig,
 )
 from ..diffusion.defaults import EVALUATED_METHODS
-from ..pipeline.outputs import output_file, output_folder
+from ..pipeline.outputs import output_file, output_folder, own_folder
 from ..pipeline.stages import StageOptions, chain_step
 from . import (
     add_frames_option,
@@ -236,7 +236,7 @@ def add_commands(sub) -> None:
         action="store_true",
         help="score raw 3DGS and each of --methods against the package's lateral ground truth",
     )
-    p.add_argument("--methods", type=_names, default=list(EVALUATED_METHODS),
+    p.add_argument("--methods", type=_names,
                    help="with --evaluate: comma-separated methods (default: " + ",".join(EVALUATED_METHODS) + "; "
                         "warp = the recorded neighbours warped over the ground, geo_* = the chain guided by it)")
     p.add_argument("--geometry-guided", action="store_true",
@@ -402,7 +402,7 @@ def _restore(args) -> int:
     sampler = replace(default, **given(args, "steps", "n_start", "seed", "samples", "noise_free", "strength",
                                          "keep_warp", max_memory_gib="max_memory"))
     steps, n_start = sampler.steps, sampler.n_start
-    output_folder(args.out)
+    tree = own_folder(args.out)
     if n_start >= steps:
         raise SymDriveError(f"--n-start {n_start}{' (the default)' if args.n_start is None else ''} must be "
                             f"below --steps {steps}: the sampler starts at step n_start of steps")
@@ -427,12 +427,12 @@ def _restore(args) -> int:
         ),
     )
     if args.evaluate:
-        metrics = _evaluate(args, manifest, gaussians, restorer, sampler)
-        write_text_atomic(args.out / "metrics.json", json.dumps(metrics, indent=1) + "\n")
+        metrics = _evaluate(args, tree, manifest, gaussians, restorer, sampler)
+        write_text_atomic(tree.path("metrics.json"), json.dumps(metrics, indent=1) + "\n")
         print(json.dumps(metrics["lateral"], indent=1))
         return 0
-    index = _restore_frames(args, manifest, gaussians, restorer, sampler)
-    write_text_atomic(args.out / "restored.json", json.dumps(index, indent=1) + "\n")
+    index = _restore_frames(args, tree, manifest, gaussians, restorer, sampler)
+    write_text_atomic(tree.path("restored.json"), json.dumps(index, indent=1) + "\n")
     print(f"wrote {len(index['views'])} restored views to {args.out}")
     return 0
 
@@ -453,19 +453,31 @@ def _check_frames(manifest, args) -> None:
 
 def _check_truth(manifest, args) -> None:
     """--evaluate scores against the lateral ground truth, which imported packages lack: say so
-    before the restorer loads. --refine only runs inside the evaluation."""
+    before the restorer loads, and which frames asked for have none. --refine only runs inside the
+    evaluation, and the options of the two only with them."""
+    import warnings
+
     from ..errors import InputError
     from ..eval.views import lateral_targets
 
+    needs = {"--methods": ("evaluate", args.methods), "--refine-iters": ("refine", args.refine_iters),
+             "--refine-frames": ("refine", args.refine_frames)}
+    for option, (mode, value) in needs.items():
+        if value is not None and not getattr(args, mode):
+            raise InputError("restore", f"is used by --{mode}, which is not given", option)
     if args.evaluate:
-        lateral_targets(manifest, args.frames,
-                        "restore --evaluate needs it; drop --evaluate to restore without scoring")
+        targets = lateral_targets(manifest, args.frames,
+                                  "restore --evaluate needs it; drop --evaluate to restore without scoring")
+        scored = {v.frame for v in targets}
+        if unscored := [f for f in args.frames or () if f not in scored]:
+            warnings.warn(f"frame(s) {', '.join(map(str, unscored))} have no lateral ground truth: not scored",
+                          stacklevel=2)
     elif args.refine:
         raise InputError("restore", "needs --evaluate (`symdrive run` refines a package without ground truth)",
                          "--refine")
 
 
-def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
+def _restore_frames(args, tree, manifest, gaussians, restorer, sampler) -> dict:
     from ..diffusion.restore import restore_lateral_views
     from ..io.images import write_image
     from ..scene.ground_truth import truth_camera
@@ -476,21 +488,22 @@ def _restore_frames(args, manifest, gaussians, restorer, sampler) -> dict:
     index = []
     for v in views:
         rel = f"{v.offset_m:+.2f}/{v.frame:06d}.png"
-        write_image(args.out / rel, v.image)
+        write_image(tree.path(rel), v.image)
         index.append({"frame": v.frame, "offset_m": v.offset_m, "image": rel, "K": v.K.tolist(),
                       "camera_to_world": v.camera_to_world.tolist(), "width": v.width, "height": v.height})
     return {"camera": cam.name, "step_m": args.step, "sampler": vars(sampler), "views": index}
 
 
-def _evaluate(args, manifest, gaussians, restorer, sampler) -> dict:
+def _evaluate(args, tree, manifest, gaussians, restorer, sampler) -> dict:
     from ..eval.restoration import RefineStudy, restoration_study
     from ..io.ply import write_splats
 
     iters = replace(RefineConfig(), **given(args, iters="refine_iters")).iters
     refine = (RefineStudy(args.offsets, args.step, args.refine_frames, iters, args.geometry_guided)
               if args.refine else None)
-    metrics, refined = restoration_study(manifest, gaussians, restorer, methods=tuple(args.methods), sampler=sampler,
+    methods = tuple(args.methods or EVALUATED_METHODS)
+    metrics, refined = restoration_study(manifest, gaussians, restorer, methods=methods, sampler=sampler,
                                          frames=args.frames, refine=refine, progress=not args.quiet)
     if refined is not None:
-        write_splats(args.out / "refined.ply", refined)
+        write_splats(tree.path("refined.ply"), refined)
     return metrics

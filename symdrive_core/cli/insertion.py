@@ -58,12 +58,15 @@ def add_commands(sub) -> None:
 
 def _insert(args) -> int:
     from ..insertion.render_actor import insert_actor
-    from ..pipeline.outputs import output_folder
+    from ..pipeline.outputs import own_folder
     from ..scene import check_files, load_manifest
 
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)
     check_files(manifest)
-    out = output_folder(args.out if args.out else manifest.output_dir() / "insert")
+    tree = own_folder(args.out if args.out else manifest.output_dir() / "insert")
+    for cam in manifest.cameras:  # the frames are written under a folder per camera
+        tree.folder(cam.name)
+    out = tree.root
     n = insert_actor(manifest, args.actor, out, background=args.gaussians, flip=args.flip_forward,
                      from_mesh=args.from_mesh, progress=not args.quiet, **given(args, n_samples="mesh_gaussians"))
     print(f"wrote {n} frame(s) of {args.actor} to {out}")

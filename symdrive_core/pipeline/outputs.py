@@ -189,6 +189,17 @@ class OutputTree:
         return removed
 
 
+def own_folder(out: str | os.PathLike, option: str = "--out") -> OutputTree:
+    """``out`` for a command that writes its files by name (``restore``, ``insert``): new, empty
+    or holding only what symdrive commands wrote there. A user's file there is refused before any
+    work, since the command could write over it."""
+    tree = OutputTree(output_folder(out, option))
+    if foreign := tree.foreign_files():
+        raise OutputError(f"{out}: holds {len(foreign)} file(s) no symdrive command wrote ({foreign[0]}"
+                          f"{', ...' if len(foreign) > 1 else ''}): choose a new or empty {option}")
+    return tree
+
+
 @contextlib.contextmanager
 def unmade_if_refused(root: Path):
     """Run the body; if it is refused (a :class:`SymDriveError`: bad input found before anything

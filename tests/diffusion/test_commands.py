@@ -110,13 +110,18 @@ def test_pairs_train_restore_evaluate_refine_from_the_command_line(synthetic_pac
 
     # at strength 0 every view is its start: the warp for the guided chain, the render for the other
     out = tmp_path / "eval-start"
-    assert main(["restore", str(root), *common, "--out", str(out), "--evaluate", "--frames", "0", "--offsets", "0.5",
+    capsys.readouterr()
+    assert main(["restore", str(root), *common, "--out", str(out), "--evaluate", "--frames", "0,1", "--offsets", "0.5",
                  "--methods", "warp,geo_single_view,ar_d1.0", "--strength", "0"]) == 0
+    assert "symdrive restore: warning: frame(s) 1 have no lateral ground truth: not scored" in capsys.readouterr().err
     psnr = {r["method"]: r["psnr"] for r in json.loads((out / "metrics.json").read_text())["lateral"]}
     assert psnr["geo_single_view"] == psnr["warp"] and psnr["ar_d1.0"] == psnr["raw_3dgs"]
     with pytest.raises(SystemExit) as exc:
         main(["restore", str(root), *common, "--out", str(out), "--strength", "1.5"])
     assert exc.value.code == 2
+    for flags in (["--methods", "warp"], ["--evaluate", "--refine-iters", "2"]):
+        assert main(["restore", str(root), *common, "--out", str(tmp_path / "unused"), *flags]) == 2
+        assert f"{flags[-2]}: is used by --" in capsys.readouterr().err
 
     out = tmp_path / "views"
     assert main(["restore", str(root), *common, "--out", str(out), "--offsets", "1", "--frames", "0,4",
@@ -214,6 +219,8 @@ def test_outputs_of_the_wrong_kind_are_refused_before_any_work(synthetic_package
          "--frames 9 is not a frame of camera 'front'"),
         (["insert-eval", str(root), "--gaussians", "x.ply", "--assets-out", str(a_file)], "--assets-out names a file"),
         (["bench", "accuracy-time", "--package", str(root), "--out", str(a_file)], "--out names a file"),
+        (["restore", str(root), "--gaussians", str(ply), "--out", str(tmp_path)], "no symdrive command wrote"),
+        (["insert", str(root), "--actor", "car", "--out", str(tmp_path)], "no symdrive command wrote"),
     ):
         assert main(argv) == 2
         assert says in capsys.readouterr().err

@@ -74,7 +74,7 @@ def test_every_frames_option_takes_the_one_syntax(base, option):
     # comma lists of numbers
     (["restore", PKG, "--offsets", "a,b", "--out", "OUT"], "restore", "argument --offsets"),
     (["make-pairs", PKG, "--offsets", "0,1", "--out", "OUT"], "make-pairs", "argument --offsets: expected positive"),
-    (["make-pairs", PKG, "--cycle", "0", "--out", "OUT"], "make-pairs", "argument --cycle: expected non-zero"),
+    (["make-pairs", PKG, "--cycle", "0", "--out", "OUT"], "make-pairs", "argument --cycle: expected finite non-zero"),
     # a device this build lacks (CUDA on a CPU-only torch or a GPU index past the last)
     (["run", PKG, "--device", "cuda:99"], "run", "argument --device"),
     (["render", PKG, "--camera", "front", "--device", "tpu", "--out", "OUT"], "render", "argument --device"),
@@ -82,8 +82,8 @@ def test_every_frames_option_takes_the_one_syntax(base, option):
     (["run", PKG, "--max-memory", "nan"], "run", "argument --max-memory: must be a finite number above 0, got nan"),
     (["run", PKG, "--max-memory", "0"], "run", "argument --max-memory: must be a finite number above 0, got 0"),
     (["restore", PKG, "--max-memory", "inf", "--out", "OUT"], "restore", "argument --max-memory: must be a finite"),
-    (["restore", PKG, "--step", "nan", "--out", "OUT"], "restore", "argument --step: must be a finite number, 0 or more"),
-    (["restore", PKG, "--step", "-1", "--out", "OUT"], "restore", "argument --step: must be a finite number, 0 or more"),
+    (["restore", PKG, "--step", "nan", "--out", "OUT"], "restore", "argument --step: must be 0 (single view) or a finite step of at least 0.01 m"),
+    (["restore", PKG, "--step", "-1", "--out", "OUT"], "restore", "argument --step: must be 0 (single view) or a finite step of at least 0.01 m"),
     (["import", "colmap", "M", "--out", "OUT", "--fps", "inf"], "import colmap", "argument --fps: must be a finite"),
     (["import", "kitti", "S", "--out", "OUT", "--camera-height", "-1.6"], "import kitti",
      "argument --camera-height: must be a finite number above 0"),
