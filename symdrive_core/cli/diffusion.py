@@ -304,6 +304,8 @@ def _make_pairs(args) -> int:
     output_file(args.out)
     manifest, ply = _reconstruction(args)
     _check_frames(manifest, args)
+    if args.sensor:
+        _check_sensor_truth(manifest, args.frames)
     cycle = cycle_config(CycleConfig(**given(args, iters="cycle_iters", max_gaussians="cycle_max_gaussians")))
     out = make_pairs(
         manifest, read_splats(ply, drop_invalid=True), args.offsets, args.out, frames=args.frames,
@@ -449,6 +451,20 @@ def _check_frames(manifest, args) -> None:
         if bad:
             raise InputError(manifest.path or manifest.root, f"{option} {bad[0]} is not a frame of camera "
                              f"{cam.name!r} (0 to {len(cam.frames) - 1})", f"cameras.{cam.name}.frames")
+
+
+def _check_sensor_truth(manifest, frames) -> None:
+    """--sensor asks for the pairs a rig's second camera recorded: say so when there are none
+    (the adaptation, which asks wherever there are some, does without)."""
+    from ..diffusion.sensor_pairs import sensor_views
+    from ..errors import InputError
+    from ..scene.ground_truth import split_frames
+
+    cam = manifest.cameras[0]  # the camera make-pairs shifts
+    if not sensor_views(manifest, cam.name, split_frames(manifest)[0] if frames is None else frames):
+        raise InputError(manifest.path or manifest.root, f"--sensor: no recorded camera gave lateral truth of camera "
+                         f"{cam.name!r} at these frames (a rig imported with --lateral-truth does)",
+                         "ground_truth.lateral")
 
 
 def _check_truth(manifest, args) -> None:

@@ -83,6 +83,14 @@ def _insert_eval(args) -> int:
     from ..scene.ground_truth import require_truth
     from . import print_json, write_json
 
+    if args.no_harmonize:  # the fine-tune fits the harmonized frames: without them these would do nothing
+        from ..errors import InputError
+
+        for option, value in (("--steps", args.steps), ("--samples", args.samples),
+                              ("--finetune-iters", args.finetune_iters), ("--assets-out", args.assets_out),
+                              ("--weights", args.weights)):
+            if value is not None:
+                raise InputError("insert-eval", "harmonizes and fine-tunes, which --no-harmonize leaves out", option)
     if args.assets_out:
         output_folder(args.assets_out, "--assets-out")
     manifest = load_manifest(args.package, allow_external=args.allow_external_assets)

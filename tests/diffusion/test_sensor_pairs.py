@@ -9,6 +9,7 @@ import pytest
 import torch
 from safetensors.numpy import load_file
 
+from symdrive_core.cli import main
 from symdrive_core.diffusion.adapt import AdaptConfig, adapt_restorer, drive_identity
 from symdrive_core.diffusion.config import CycleConfig
 from symdrive_core.diffusion.cycle import cycle_config
@@ -68,6 +69,12 @@ def test_rendered_truth_is_no_sensor(synthetic_package, tmp_path):  # noqa: F811
     out = make_pairs(load_manifest(root), g, [0.5], tmp_path / "p.safetensors", cycle_offsets=[1.0], sensor=True,
                      cycle_config=QUICK_CYCLE, progress=False)
     assert not any(k.startswith("sensor_") for k in load_file(str(out)))
+    # asked for on the command line, none there is said, before any work
+    ply = tmp_path / "g.ply"
+    write_splats(ply, g)
+    assert main(["make-pairs", str(root), "--gaussians", str(ply), "--cycle=1", "--sensor", "--out",
+                 str(tmp_path / "s.safetensors")]) == 2
+    assert not (tmp_path / "s.safetensors").exists()
 
 
 def test_pair_set_reads_sensor_pairs_with_their_own_start_and_warp(rig, tmp_path):

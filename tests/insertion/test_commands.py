@@ -57,6 +57,12 @@ def test_insert_eval_baselines_to_json(tmp_path, capsys):
     assert args.func(args) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())["insertion"]
     assert [r["method"] for r in rows] == ["naive", "color_transfer"]
+    for option in (["--finetune-iters", "5"], ["--assets-out", str(tmp_path / "assets")], ["--steps", "2"]):
+        args = _parse(["insert-eval", str(path), "--gaussians", str(path.parent / "background.ply"), "--no-harmonize",
+                       *option])
+        with pytest.raises(InputError, match=f"{option[0]}: harmonizes and fine-tunes, which --no-harmonize leaves"):
+            args.func(args)
+    assert not (tmp_path / "assets").exists()
 
 
 def test_insert_eval_harmonizes_with_the_weights_given(tmp_path):
