@@ -133,7 +133,7 @@ def dome_radius(views: list[View]) -> float:
     return max(SKY_DISTANCE_FACTOR * scene_extent(views)[0], 150.0)
 
 
-def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 2048) -> np.ndarray:
+def knn_scale(points: np.ndarray, k: int = 3, chunk: int = 1024) -> np.ndarray:
     """Root mean squared distance to the k nearest neighbours (the 3DGS initial scale).
 
     Centred and in float64: the distances come from |a|^2 + |b|^2 - 2ab, which in float32 cancels
