@@ -25,6 +25,7 @@ from ..errors import InputError
 from ..io.atomic import atomic_path
 from .config import LORA_TARGETS
 from .latent import VAESpace
+from .pretrained import load_pretrained
 
 VIEW_CENTRE, VIEW_LEFT, VIEW_RIGHT = 0, 1, 2
 
@@ -217,10 +218,8 @@ def load_flux(
     from diffusers import AutoencoderKL, FluxTransformer2DModel
     from safetensors.torch import load_file
 
-    net = FluxTransformer2DModel.from_pretrained(
-        str(files.transformer), torch_dtype=dtype, local_files_only=True
-    )
-    ae = AutoencoderKL.from_pretrained(str(files.vae), torch_dtype=dtype, local_files_only=True)
+    net = load_pretrained(FluxTransformer2DModel, files.transformer, "the FLUX.1-dev transformer", torch_dtype=dtype)
+    ae = load_pretrained(AutoencoderKL, files.vae, "the FLUX.1-dev VAE", torch_dtype=dtype)
     load_lora(net, files.lora)
     emb = load_file(str(files.prompt))
     for key in ("prompt_embeds", "pooled_prompt_embeds"):

@@ -21,6 +21,7 @@ import torch
 from ..errors import InputError
 from ..io.atomic import atomic_path
 from .config import FLUX_PROMPT_TOKENS
+from .pretrained import load_pretrained
 
 DEFAULT_PROMPT = "a sharp, clean photo of a street seen from a car, road, lane markings, cars, buildings"
 SUBFOLDERS = {"clip": "text_encoder", "clip_tokenizer": "tokenizer", "t5": "text_encoder_2", "t5_tokenizer": "tokenizer_2"}
@@ -45,15 +46,15 @@ def prompt_embeddings(text_encoders, text: str = DEFAULT_PROMPT, max_length: int
 
     paths = _check(Path(text_encoders))
     dtype = torch.bfloat16 if device.startswith("cuda") else torch.float32
-    clip_tok = AutoTokenizer.from_pretrained(str(paths["clip_tokenizer"]), local_files_only=True)
-    t5_tok = AutoTokenizer.from_pretrained(str(paths["t5_tokenizer"]), local_files_only=True)
-    clip = CLIPTextModel.from_pretrained(str(paths["clip"]), torch_dtype=dtype, local_files_only=True).to(device)
+    clip_tok = load_pretrained(AutoTokenizer, paths["clip_tokenizer"], "the CLIP tokenizer")
+    t5_tok = load_pretrained(AutoTokenizer, paths["t5_tokenizer"], "the T5 tokenizer")
+    clip = load_pretrained(CLIPTextModel, paths["clip"], "the CLIP text encoder", torch_dtype=dtype).to(device)
     ids = clip_tok(
         [text], padding="max_length", max_length=clip_tok.model_max_length, truncation=True, return_tensors="pt"
     ).input_ids
     pooled = clip(ids.to(device), output_hidden_states=False).pooler_output[0].float().cpu()
     del clip
-    t5 = T5EncoderModel.from_pretrained(str(paths["t5"]), torch_dtype=dtype, local_files_only=True).to(device)
+    t5 = load_pretrained(T5EncoderModel, paths["t5"], "the T5 text encoder", torch_dtype=dtype).to(device)
     ids = t5_tok([text], padding="max_length", max_length=max_length, truncation=True, return_tensors="pt").input_ids
     embeds = t5(ids.to(device), output_hidden_states=False)[0][0].float().cpu()
     return embeds, pooled

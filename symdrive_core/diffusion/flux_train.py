@@ -32,6 +32,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 from . import flow
 from .config import FluxTrainConfig
 from .flux import FluxRestorer, add_lora, save_lora
+from .pretrained import load_pretrained
 from .train import load_optimizer_tensors, optimizer_tensors
 
 CHECKPOINT = "flux_checkpoint.safetensors"
@@ -207,8 +208,8 @@ def train_flux_lora(
     precision = cfg.mixed_precision if cfg.mixed_precision != "auto" else ("bf16" if cuda else "no")
     acc = Accelerator(mixed_precision=precision, gradient_accumulation_steps=cfg.grad_accum, cpu=not cuda)
     base_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(precision, torch.float32)
-    net = FluxTransformer2DModel.from_pretrained(str(transformer_dir), torch_dtype=base_dtype, local_files_only=True)
-    ae = AutoencoderKL.from_pretrained(str(vae_dir), torch_dtype=base_dtype, local_files_only=True)
+    net = load_pretrained(FluxTransformer2DModel, transformer_dir, "the FLUX.1-dev transformer", torch_dtype=base_dtype)
+    ae = load_pretrained(AutoencoderKL, vae_dir, "the FLUX.1-dev VAE", torch_dtype=base_dtype)
     text, pooled = read_prompt(prompt, net.config.joint_attention_dim, net.config.pooled_projection_dim)
     torch.manual_seed(cfg.seed)
     add_lora(net, rank=cfg.rank, alpha=cfg.alpha, targets=cfg.targets)

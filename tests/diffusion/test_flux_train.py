@@ -186,3 +186,14 @@ def test_flux_prompt_writes_a_file_the_flux_backend_loads(files, tmp_path, capsy
     assert main(["flux-prompt", "--text-encoders", str(tmp_path / "none"), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert "none" in err and "--text-encoders" in err and len(err.splitlines()) == 1
+    # a truncated weights file, a config that is not JSON: one line naming the folder
+    weights = next((tmp_path / "enc" / "text_encoder_2").glob("*.safetensors"))
+    weights.write_bytes(weights.read_bytes()[:100])
+    assert main(["flux-prompt", "--text-encoders", str(tmp_path / "enc"), "--out", str(tmp_path / "p2")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]  # after transformers' own loading bar of the CLIP
+    assert err.startswith("symdrive flux-prompt: error: ") and "text_encoder_2: cannot load the T5 text encoder" in err
+    (tmp_path / "enc" / "text_encoder" / "config.json").write_text("{not json")
+    assert main(["flux-prompt", "--text-encoders", str(tmp_path / "enc"), "--out", str(tmp_path / "p2")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("symdrive flux-prompt: error: ") and "text_encoder: cannot load the CLIP text encoder" in err
+    assert not (tmp_path / "p2").exists()
