@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from symdrive_core.cli import count_int, positive_int, positive_number
+
 DEMO = Path(__file__).resolve().parents[1] / "symdrive_core" / "data" / "demo_street"
 CARS = ("insert_0", "insert_1")
 BENCH_FRAMES = (2, 7)  # demo frames whose cameras see both cars ahead
@@ -118,15 +120,15 @@ def build_package(root: Path, width: int, height: int, gaussians: int, frames: i
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="960x540, 1M Gaussians, 1 frame")
-    p.add_argument("--width", type=int)
-    p.add_argument("--height", type=int)
-    p.add_argument("--gaussians", type=int, help="background Gaussians after splitting (default 3000000)")
+    p.add_argument("--width", type=positive_int)
+    p.add_argument("--height", type=positive_int)
+    p.add_argument("--gaussians", type=positive_int, help="background Gaussians after splitting (default 3000000)")
     p.add_argument("--frames", type=int, choices=(1, 2), help="frames to run (default 2, 1 with --quick)")
-    p.add_argument("--max-memory", type=float, metavar="GiB",
+    p.add_argument("--max-memory", type=positive_number, metavar="GiB",
                    help="memory for one restorer evaluation (default: the pipeline's)")
-    p.add_argument("--samples", type=int, help="restoration samples per view (default: the pipeline's)")
-    p.add_argument("--finetune-iters", type=int, default=100)
-    p.add_argument("--refine-iters", type=int, default=0, help="3DGS refinement iterations (0: not run)")
+    p.add_argument("--samples", type=positive_int, help="restoration samples per view (default: the pipeline's)")
+    p.add_argument("--finetune-iters", type=count_int, default=100)
+    p.add_argument("--refine-iters", type=count_int, default=0, help="3DGS refinement iterations (0: not run)")
     p.add_argument("--keep", type=Path, help="build the package here and keep it (default: a temporary folder)")
     p.add_argument("--json", type=Path, help="also write the results here")
     p.add_argument("--compare", action="store_true",

@@ -22,6 +22,7 @@ from symdrive_core.bench.reconstruction import (
     training_pixels,
     write_outputs,
 )
+from symdrive_core.cli import positive_int
 from symdrive_core.scene import load_manifest
 
 
@@ -36,8 +37,8 @@ def commit() -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("package", help="scene package directory or its manifest.json (with held-out frames)")
-    ap.add_argument("--iters", type=int, default=None, help="iterations of every schedule (default: the config's)")
-    ap.add_argument("--every", type=int, default=100, help="score the held-out frames every this many iterations")
+    ap.add_argument("--iters", type=positive_int, default=None, help="iterations of every schedule (default: the config's)")
+    ap.add_argument("--every", type=positive_int, default=100, help="score the held-out frames every this many iterations")
     ap.add_argument("--only", nargs="+", choices=list(SCHEDULES), help="these schedules (default: all)")
     ap.add_argument("--out", type=Path, default=Path("out/bench_reconstruct"))
     ap.add_argument("--quiet", action="store_true")

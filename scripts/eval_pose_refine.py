@@ -24,6 +24,8 @@ import json
 import sys
 from pathlib import Path
 
+from symdrive_core.cli import number_at_least_zero
+
 
 def _jitter(args) -> int:
     import numpy as np
@@ -90,8 +92,8 @@ def main(argv=None) -> int:
     j = sub.add_parser("jitter", help="write the package's recorded vehicles' boxes, jittered, as a tracks file")
     j.add_argument("package", type=Path)
     j.add_argument("--out", type=Path, required=True, help="the tracks JSON to write")
-    j.add_argument("--translation-m", type=float, default=0.2, help="each box moved this far, a random direction")
-    j.add_argument("--yaw-deg", type=float, default=2.0, help="and turned this much, either way")
+    j.add_argument("--translation-m", type=number_at_least_zero, default=0.2, help="each box moved this far, a random direction")
+    j.add_argument("--yaw-deg", type=number_at_least_zero, default=2.0, help="and turned this much, either way")
     j.add_argument("--seed", type=int, default=0)
     j.set_defaults(func=_jitter)
     s = sub.add_parser("score", help="the fits' poses and held-out vehicles against the truth")

@@ -38,25 +38,28 @@ def parse_args(argv=None):
     import bpy  # noqa: F401  (first: the world modules import bmesh, which comes with it)
     from world import drive, render
 
+    from symdrive_core.cli import count_int, number_at_least_zero, positive_int, positive_number, seed_int
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", required=True, type=Path, help="package directory to write (replaced atomically)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--width", type=int, default=256)
-    p.add_argument("--height", type=int, default=144)
-    p.add_argument("--frames", type=int, default=30, help="training-drive frames")
-    p.add_argument("--spacing", type=float, default=1.0, help="metres between training frames")
-    p.add_argument("--samples", type=int, default=32, help="Cycles samples per pixel (denoised with OIDN)")
+    p.add_argument("--out", required=True, type=Path,
+                   help="package directory to write (a package there is replaced atomically; other files refuse it)")
+    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--width", type=positive_int, default=256)
+    p.add_argument("--height", type=positive_int, default=144)
+    p.add_argument("--frames", type=positive_int, default=30, help="training-drive frames")
+    p.add_argument("--spacing", type=positive_number, default=1.0, help="metres between training frames")
+    p.add_argument("--samples", type=positive_int, default=32, help="Cycles samples per pixel (denoised with OIDN)")
     p.add_argument("--overcast", action="store_true", help="no sun: flat grey sky, no hard shadows")
-    p.add_argument("--lateral-every", type=int, default=2, help="render lateral offsets at every k-th frame")
+    p.add_argument("--lateral-every", type=positive_int, default=2, help="render lateral offsets at every k-th frame")
     p.add_argument("--offsets", type=float, nargs="*", default=list(LATERAL_OFFSETS))
-    p.add_argument("--holdout-every", type=int, default=5, help="every k-th frame is held out of training")
-    p.add_argument("--placements", type=int, default=3, help="held-out vehicle insertions")
-    p.add_argument("--points", type=int, default=60000, help="points in the initial point cloud (at most)")
-    p.add_argument("--asset-splats", type=int, default=12000, help="splats per vehicle asset")
-    p.add_argument("--traffic", type=int, default=0,
+    p.add_argument("--holdout-every", type=positive_int, default=5, help="every k-th frame is held out of training")
+    p.add_argument("--placements", type=count_int, default=3, help="held-out vehicle insertions")
+    p.add_argument("--points", type=positive_int, default=60000, help="points in the initial point cloud (at most)")
+    p.add_argument("--asset-splats", type=positive_int, default=12000, help="splats per vehicle asset")
+    p.add_argument("--traffic", type=count_int, default=0,
                    help="moving vehicles driving while the ego records (existing actors, with exact truth for "
                         "removing, moving and retiming them on held-out frames)")
-    p.add_argument("--edit-pixels", type=int, default=200,
+    p.add_argument("--edit-pixels", type=count_int, default=200,
                    help="least visible pixels of a traffic car for a held-out frame's edit truth")
     p.add_argument("--parked-existing", action="store_true",
                    help="the parked cars in view of the drive become existing actors too (ids parked_<k>, the same "
@@ -64,14 +67,14 @@ def parse_args(argv=None):
                         "visible parked car (at least --edit-pixels); gt/vehicles stays the moving traffic only")
     p.add_argument("--save-blend", action="store_true", help="also save world.blend in the package")
     # what another drive varies: the camera, the ground's materials, the sensor (a family of streets)
-    p.add_argument("--camera-height", type=float, default=drive.CAMERA_HEIGHT, help="metres above the road")
+    p.add_argument("--camera-height", type=positive_number, default=drive.CAMERA_HEIGHT, help="metres above the road")
     p.add_argument("--pitch", type=float, default=drive.PITCH_DEG, help="degrees the camera looks down")
-    p.add_argument("--lens-mm", type=float, default=render.LENS_MM, help="focal length on a 36 mm sensor")
-    p.add_argument("--material-jitter", type=float, default=0.0,
+    p.add_argument("--lens-mm", type=positive_number, default=render.LENS_MM, help="focal length on a 36 mm sensor")
+    p.add_argument("--material-jitter", type=number_at_least_zero, default=0.0,
                    help="each ground material's colours scaled by a seeded 1 +/- this per channel")
-    p.add_argument("--noise", type=float, default=0.0, help="sensor noise: standard deviation in [0, 1] units")
-    p.add_argument("--blur", type=float, default=0.0, help="Gaussian blur of every recorded image, sigma in pixels")
-    p.add_argument("--exposure-jitter", type=float, default=0.0,
+    p.add_argument("--noise", type=number_at_least_zero, default=0.0, help="sensor noise: standard deviation in [0, 1] units")
+    p.add_argument("--blur", type=number_at_least_zero, default=0.0, help="Gaussian blur of every recorded image, sigma in pixels")
+    p.add_argument("--exposure-jitter", type=number_at_least_zero, default=0.0,
                    help="each frame's exposure scaled by exp(u), u uniform in +/- this")
     return p.parse_args(argv)
 
@@ -83,6 +86,10 @@ def main(argv=None) -> int:
 
     from symdrive_core.io.atomic import atomic_directory
 
+    if args.out.exists() and any(args.out.iterdir()) and not (args.out / "manifest.json").is_file():
+        print(f"make_world.py: error: {args.out}: --out holds files and is no scene package: it would be replaced "
+              "whole; choose a new or empty folder", file=sys.stderr)
+        return 2
     t0 = time.time()
     with atomic_directory(args.out) as tmp:
         writer = PackageWriter(tmp, args)

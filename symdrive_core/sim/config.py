@@ -47,7 +47,8 @@ class SimConfig:
     corridor_half_width_m: float = 3.5
     # Off-road when any footprint corner lies this far beyond the road's edge.
     offroad_margin_m: float = 0.0
-    # The route (the recorded ego path) ends this far before its last point.
+    # The route (the recorded ego path) ends this far before its last point (negative: past it, so
+    # only the time limit ends an episode, as a benchmark of steps wants).
     route_end_margin_m: float = 1.0
     # Footprint of actors without wlh.
     default_actor_wlh: tuple[float, float, float] = (1.8, 4.5, 1.5)
@@ -87,7 +88,7 @@ class SimConfig:
                     "max_speed", "waypoint_speed_gain", "waypoint_reach_m", "corridor_half_width_m",
                     "restore_offset_round_m", "restore_ar_step_m", "sumo_speed", "sumo_timeout_s", "ttc_horizon_s",
                     "ttc_step_s"]
-        at_least_zero = ["offroad_margin_m", "route_end_margin_m", "restore_threshold_m"]
+        at_least_zero = ["offroad_margin_m", "restore_threshold_m"]
         for name in ("dt", "time_limit_s"):
             if getattr(self, name) is not None:
                 positive.append(name)
@@ -95,7 +96,8 @@ class SimConfig:
             _check_number(name, getattr(self, name), 0.0, inclusive=False)
         for name in at_least_zero:
             _check_number(name, getattr(self, name), 0.0, inclusive=True)
-        _check_number("camera_ahead_m", self.camera_ahead_m, -math.inf, inclusive=False)
+        for name in ("camera_ahead_m", "route_end_margin_m"):
+            _check_number(name, getattr(self, name), -math.inf, inclusive=False)
         if not self.max_steer < math.pi / 2:
             raise ValueError(f"max_steer: expected below pi/2 rad (a wheel turned 90 degrees), got {self.max_steer}")
         for name in ("ego_wlh", "default_actor_wlh"):

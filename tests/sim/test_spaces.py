@@ -184,3 +184,4 @@ def test_config_refuses_values_no_drive_runs_with(field, value):
 def test_config_takes_numpy_numbers_and_the_defaults():
     cfg = SimConfig(dt=np.float64(0.05), image_size=(np.int64(160), np.int64(90)), sumo_vehicles=np.int64(3))
     assert cfg.dt == 0.05 and SimConfig().action == "accel_steer"
+    assert SimConfig(route_end_margin_m=-1e6).route_end_margin_m == -1e6  # past the route: only time ends it

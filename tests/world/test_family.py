@@ -35,6 +35,17 @@ def test_the_sensor_model_is_seeded_per_frame_and_image():
     assert SensorEffects().apply(clean, 0, 3, "k") is clean  # off: the render as it is
 
 
+
+def test_the_generator_refuses_an_out_folder_of_other_files(tmp_path, capsys):
+    """``--out`` is replaced whole: a folder of the user's files (no package) was deleted."""
+    pytest.importorskip("bpy")
+    from tests.scripts import load_script
+
+    (tmp_path / "notes.txt").write_text("mine")
+    assert load_script("make_world").main(["--out", str(tmp_path), "--frames", "2"]) == 2
+    assert "holds files and is no scene package" in capsys.readouterr().err
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
 def test_the_blur_has_the_asked_width_and_keeps_the_mean():
     dot = np.zeros((41, 41, 3), np.float32)
     dot[20, 20] = 1.0
