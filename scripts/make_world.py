@@ -86,9 +86,10 @@ def main(argv=None) -> int:
 
     from symdrive_core.io.atomic import atomic_directory
 
-    if args.out.exists() and any(args.out.iterdir()) and not (args.out / "manifest.json").is_file():
-        print(f"make_world.py: error: {args.out}: --out holds files and is no scene package: it would be replaced "
-              "whole; choose a new or empty folder", file=sys.stderr)
+    if args.out.exists() and not (args.out.is_dir() and (not any(args.out.iterdir())
+                                                          or (args.out / "manifest.json").is_file())):
+        print(f"make_world.py: error: {args.out}: --out is no new or empty folder and no scene package: it would be "
+              "replaced whole; choose a new or empty folder", file=sys.stderr)
         return 2
     t0 = time.time()
     with atomic_directory(args.out) as tmp:

@@ -43,7 +43,7 @@ def test_the_generator_refuses_an_out_folder_of_other_files(tmp_path, capsys):
 
     (tmp_path / "notes.txt").write_text("mine")
     assert load_script("make_world").main(["--out", str(tmp_path), "--frames", "2"]) == 2
-    assert "holds files and is no scene package" in capsys.readouterr().err
+    assert "is no new or empty folder and no scene package" in capsys.readouterr().err
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 def test_the_blur_has_the_asked_width_and_keeps_the_mean():
