@@ -52,7 +52,8 @@ def parse_args(argv=None):
     p.add_argument("--overcast", action="store_true", help="no sun: flat grey sky, no hard shadows")
     p.add_argument("--lateral-every", type=positive_int, default=2, help="render lateral offsets at every k-th frame")
     p.add_argument("--offsets", type=float, nargs="*", default=list(LATERAL_OFFSETS))
-    p.add_argument("--holdout-every", type=positive_int, default=5, help="every k-th frame is held out of training")
+    p.add_argument("--holdout-every", type=count_int, default=5,
+                   help="every k-th frame is held out of training (0: none)")
     p.add_argument("--placements", type=count_int, default=3, help="held-out vehicle insertions")
     p.add_argument("--points", type=positive_int, default=60000, help="points in the initial point cloud (at most)")
     p.add_argument("--asset-splats", type=positive_int, default=12000, help="splats per vehicle asset")
