@@ -216,12 +216,13 @@ def load_flux(
     if missing:
         raise InputError("flux", "missing files: " + "; ".join(missing))
     from diffusers import AutoencoderKL, FluxTransformer2DModel
-    from safetensors.torch import load_file
+
+    from ..io.tensor_file import read_tensor_file
 
     net = load_pretrained(FluxTransformer2DModel, files.transformer, "the FLUX.1-dev transformer", torch_dtype=dtype)
     ae = load_pretrained(AutoencoderKL, files.vae, "the FLUX.1-dev VAE", torch_dtype=dtype)
     load_lora(net, files.lora)
-    emb = load_file(str(files.prompt))
+    emb, _ = read_tensor_file(files.prompt, "a prompt-embedding file")
     for key in ("prompt_embeds", "pooled_prompt_embeds"):
         if key not in emb:
             raise InputError(files.prompt, f"no tensor named {key!r}")

@@ -63,17 +63,14 @@ def _check_folder(folder, option: str) -> Path:
 
 def read_prompt(path, text_dim: int | None = None, pooled_dim: int | None = None):
     """``(prompt_embeds [L, D], pooled_prompt_embeds [P])`` from the file ``flux-prompt`` writes."""
-    from safetensors.torch import load_file
+    from ..io.tensor_file import read_tensor_file
 
     if path is None:
         raise InputError("--prompt", "required with --backend flux (write it with `symdrive flux-prompt`)", "--prompt")
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "prompt-embedding file not found (write it with `symdrive flux-prompt`)", "--prompt")
-    try:
-        emb = load_file(str(path))
-    except Exception as exc:  # noqa: BLE001 (safetensors raises its own types)
-        raise InputError(path, f"not a safetensors file ({type(exc).__name__})", "--prompt") from exc
+    emb, _ = read_tensor_file(path, "a prompt-embedding file", field="--prompt")
     for key in ("prompt_embeds", "pooled_prompt_embeds"):
         if key not in emb:
             raise InputError(path, "no such tensor", key)

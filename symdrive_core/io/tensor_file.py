@@ -9,16 +9,19 @@ from ..errors import InputError
 from . import check_regular
 
 
-def read_tensor_file(path: str | os.PathLike, kind: str, framework: str = "pt") -> tuple[dict, dict]:
+def read_tensor_file(path: str | os.PathLike, kind: str, framework: str = "pt",
+                     field: str | None = None) -> tuple[dict, dict]:
     """(tensors by name, metadata) of the safetensors file ``path``; ``kind`` says what it should
-    be ("restorer weights") in the error; ``framework`` is safetensors' ("pt" or "np")."""
+    be ("restorer weights") in the error, ``field`` the option that named it; ``framework`` is
+    safetensors' ("pt" or "np")."""
     from safetensors import SafetensorError, safe_open
 
-    check_regular(path)
+    check_regular(path, field)
     try:
         with safe_open(str(path), framework) as f:
             meta = dict(f.metadata() or {})
             tensors = {k: f.get_tensor(k) for k in f.keys()}  # noqa: SIM118 (not a dict)
     except (SafetensorError, OSError, ValueError) as exc:
-        raise InputError(path, f"not readable as {kind}: {str(exc).splitlines()[0] if str(exc) else exc!r}") from None
+        raise InputError(path, f"not readable as {kind}: {str(exc).splitlines()[0] if str(exc) else exc!r}",
+                         field) from None
     return tensors, meta
