@@ -35,7 +35,11 @@ def test_headless_export_of_a_saved_blend(blender, tmp_path):
     blender.ops.wm.save_as_mainfile(filepath=str(blend))
     out = tmp_path / "package"
     done = _run_blender(blend, "--out", str(out), "--frames", "2:4")
-    assert done.returncode == 0, done.stderr[-2000:]
+    # bpy 4.2's module build dies at interpreter exit after any glTF export (Blender's own exporter,
+    # as the vehicle's mesh is written; a cube exported in three lines does it without the add-on):
+    # Blender's static space types free their Python classes after Python has finalised.
+    exit_crash = blender.app.version < (4, 3) and done.returncode == -11
+    assert done.returncode == 0 or exit_crash, done.stderr[-2000:]
     log = done.stdout + done.stderr
     assert [line for line in log.splitlines() if "frame" in line and "/3" in line] == [
         f"export_scene.py: frame {i}/3" for i in (1, 2, 3)
