@@ -15,8 +15,9 @@ stopped are skipped, and the tile ends when every pixel has stopped. A row is on
 over the tile's 16 pixels (selects instead of ``if``, unsigned indices so numba emits no
 negative-index wraparound, the state in one buffer at constant offsets so LLVM needs no aliasing
 checks, and ``exp_neg`` instead of libm's scalar ``exp``), which LLVM turns into a few vector
-instructions per row; in the forward, a Gaussian whose box spans at most half a tile row (``HALF``
-pixels) takes only the ``HALF`` pixels that hold it, one vector instead of two. Pixels outside the
+instructions per row; a Gaussian whose box spans at most a quarter or half of a tile row takes only
+the ``QUARTER`` or ``HALF`` pixels that hold it (:func:`_row_window`; forward and backward alike),
+one or two AVX2 vectors of float64 instead of four. Pixels outside the
 box would have been skipped by the rule above, so the decisions are those of a pixel-outer loop over
 all Gaussians of the tile; sums differ from that order only by rounding. Each Gaussian is packed
 once per kernel call into one float64 record (geometry, sigma limit, box half widths, group,
@@ -50,7 +51,8 @@ from .constants import TILE_SIZE as TILE
 announce_compiles()
 
 NPX = TILE * TILE
-HALF = TILE // 2  # a narrow Gaussian's rows are evaluated over HALF pixels (one vector)
+HALF = TILE // 2  # a narrow Gaussian's rows are evaluated over HALF or QUARTER pixels
+QUARTER = TILE // 4
 # per-pixel state of a tile, slots of NPX values: forward (see rasterize_fwd) and backward (rasterize_bwd)
 F_T, F_DONE, F_LAST, F_W, F_ACC = range(5)
 B_T, B_FRONT, B_TOTAL, B_TFIN, B_GA, B_END, B_EXTRA, B_W, B_DSIG, B_DOP, B_GC = range(11)
@@ -521,6 +523,16 @@ def _fwd_row(st, p0, xw, width, mx, dy, a, b, c, o, lk, threshold, kk, c0, c1, c
 
 
 @njit(cache=True, inline="always")
+def _row_window(px0, px1, x0):
+    """(first tile column, width) of the row window a box's pixels [px0, px1) are evaluated over:
+    ``QUARTER``, ``HALF`` or ``TILE`` pixels, the narrowest that holds them (each call site of the
+    row functions has its width as a constant, so each is one fixed-width vector loop)."""
+    span = px1 - px0
+    wn = QUARTER if span <= QUARTER else (HALF if span <= HALF else TILE)
+    return min(px0 - x0, TILE - wn), wn
+
+
+@njit(cache=True, inline="always")
 def _unpack_record(g, x0, x1, y0, y1):
     """A packed record's 2D mean, conic, opacity, sigma limit and group, and its pixel span in the tile
     [x0, x1) x [y0, y1) (empty when px0 == px1): forward and backward read a record the same way."""
@@ -584,16 +596,17 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             c2 = col[2]
             c3 = col[3]
             kk = float(k + 1)
-            # a box at most HALF pixels wide takes one vector per row: the HALF pixels from column ws
-            narrow = px1 - px0 <= HALF
-            ws = min(px0 - x0, TILE - HALF) if narrow else 0
+            ws, wn = _row_window(px0, px1, x0)
             for py in range(py0, py1):
                 r = py - y0
                 if row_live[r] == 0:
                     continue
                 dy = my - (py + PIXEL_CENTER_OFFSET)
                 base = r * TILE
-                if narrow:
+                if wn == QUARTER:
+                    stops, kept = _fwd_row(st, base + ws, x0 + ws, QUARTER, mx, dy, a, b, c, o, lk, threshold, kk,
+                                           c0, c1, c2, c3)
+                elif wn == HALF:
                     stops, kept = _fwd_row(st, base + ws, x0 + ws, HALF, mx, dy, a, b, c, o, lk, threshold, kk,
                                            c0, c1, c2, c3)
                 else:
@@ -604,7 +617,7 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     continue
                 for ch in range(FUSED_CHANNELS, C):
                     cv = col[ch]
-                    for i in range(ws, ws + (HALF if narrow else TILE)):
+                    for i in range(ws, ws + wn):
                         p = uint64(base + i)
                         st[o_acc + uint64(ch * NPX) + p] += cv * st[o_w + p]
                 if grp >= 0:
@@ -618,6 +631,61 @@ def rasterize_fwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     out_color[py, px, ch] = st[(F_ACC + ch) * NPX + p]
                 out_T[py, px] = st[F_T * NPX + p]
                 out_last[py, px] = start + int(st[F_LAST * NPX + p])
+
+
+@njit(cache=True, inline="always")
+def _bwd_row(st, lanes, p0, q0, xw, width, mx, dy, a, b, c, o, lk, threshold, kf, c0, c1, c2, c3):
+    """The backward's pass over ``width`` pixels of a tile row (state slots from ``p0``, lanes from
+    ``q0``, image columns from ``xw``): each pixel's state update and gradient terms, then their
+    per-lane sums. Branch free with unsigned indices, two fixed-width vector loops (``width`` is a
+    constant at each call; two buffers, so the first loop needs no aliasing checks)."""
+    o_front = uint64(B_FRONT * NPX)
+    o_total = uint64(B_TOTAL * NPX)
+    o_tfin = uint64(B_TFIN * NPX)
+    o_ga = uint64(B_GA * NPX)
+    o_end = uint64(B_END * NPX)
+    o_extra = uint64(B_EXTRA * NPX)
+    o_w = uint64(B_W * NPX)
+    o_ds = uint64(B_DSIG * NPX)
+    o_do = uint64(B_DOP * NPX)
+    o_gc = uint64(B_GC * NPX)
+    for i in range(width):
+        p = uint64(p0 + i)
+        dx = mx - (xw + i + PIXEL_CENTER_OFFSET)
+        sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
+        vis = exp_neg(sigma)
+        raw = o * vis
+        alpha = min(ALPHA_MAX, raw)
+        hit = (kf < st[o_end + p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
+        gdot = (st[o_gc + p] * c0 + st[o_gc + uint64(NPX) + p] * c1 + st[o_gc + uint64(2 * NPX) + p] * c2
+                + st[o_gc + uint64(3 * NPX) + p] * c3 + st[o_extra + p])
+        Tp = st[p]  # F_T / B_T: slot 0
+        wp = alpha * Tp
+        fr = st[o_front + p] + gdot * wp
+        one_m = 1.0 - alpha
+        dl_dalpha = Tp * gdot + (st[o_ga + p] * st[o_tfin + p] - (st[o_total + p] - fr)) / one_m
+        st[o_front + p] = fr if hit else st[o_front + p]
+        st[p] = Tp * one_m if hit else Tp
+        st[o_w + p] = wp if hit else 0.0
+        grad = hit & (raw <= ALPHA_MAX)
+        st[o_ds + p] = -dl_dalpha * alpha if grad else 0.0
+        st[o_do + p] = dl_dalpha * vis if grad else 0.0
+    for i in range(width):
+        p = uint64(p0 + i)
+        q = uint64(q0 + i)
+        dx = mx - (xw + i + PIXEL_CENTER_OFFSET)
+        ds = st[o_ds + p]
+        wq = st[o_w + p]
+        lanes[q] += ds * (a * dx + b * dy)
+        lanes[uint64(TILE) + q] += ds * (c * dy + b * dx)
+        lanes[uint64(2 * TILE) + q] += 0.5 * dx * dx * ds
+        lanes[uint64(3 * TILE) + q] += dx * dy * ds
+        lanes[uint64(4 * TILE) + q] += 0.5 * dy * dy * ds
+        lanes[uint64(5 * TILE) + q] += st[o_do + p]
+        lanes[uint64(6 * TILE) + q] += wq * st[o_gc + p]
+        lanes[uint64(7 * TILE) + q] += wq * st[o_gc + uint64(NPX) + p]
+        lanes[uint64(8 * TILE) + q] += wq * st[o_gc + uint64(2 * NPX) + p]
+        lanes[uint64(9 * TILE) + q] += wq * st[o_gc + uint64(3 * NPX) + p]
 
 
 @njit(parallel=True, cache=True)
@@ -675,16 +743,6 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 st[B_TOTAL * NPX + p] = tot
         if n_end <= 0:
             continue
-        o_front = uint64(B_FRONT * NPX)
-        o_total = uint64(B_TOTAL * NPX)
-        o_tfin = uint64(B_TFIN * NPX)
-        o_ga = uint64(B_GA * NPX)
-        o_end = uint64(B_END * NPX)
-        o_extra = uint64(B_EXTRA * NPX)
-        o_w = uint64(B_W * NPX)
-        o_ds = uint64(B_DSIG * NPX)
-        o_do = uint64(B_DOP * NPX)
-        o_gc = uint64(B_GC * NPX)
         loc = np.empty((n_end, rec.shape[1]))
         _copy_records(rec, ids, start, 0, n_end, loc)
         col = np.zeros(nch)
@@ -703,7 +761,10 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
             c2 = col[2]
             c3 = col[3]
             kf = float(k)
-            lanes[:] = 0.0
+            # the row window as in the forward; only its lanes are zeroed and summed
+            ws, wn = _row_window(px0, px1, x0)
+            for f in range(6 + nch):
+                lanes[f * TILE + ws:f * TILE + ws + wn] = 0.0
             for py in range(py0, py1):
                 r = py - y0
                 if k >= row_end[r]:
@@ -712,7 +773,7 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                 base = r * TILE
                 extra_used = C > FUSED_CHANNELS or grp >= 0
                 if extra_used:
-                    for i in range(TILE):
+                    for i in range(ws, ws + wn):
                         p = base + i
                         extra = 0.0
                         for ch in range(FUSED_CHANNELS, C):
@@ -721,49 +782,18 @@ def rasterize_bwd(means2d, conics, opac, colors, groups, n_groups, offsets, ids,
                     if grp >= 0:
                         for px in range(px0, px1):
                             st[B_EXTRA * NPX + base + px - x0] += g_inst[py, px, grp]
-                # the whole tile row, branch free with unsigned indices: a fixed-width vector loop
-                for i in range(TILE):
-                    p = uint64(base + i)
-                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
-                    sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy
-                    vis = exp_neg(sigma)
-                    raw = o * vis
-                    alpha = min(ALPHA_MAX, raw)
-                    hit = (kf < st[o_end + p]) & (sigma >= 0.0) & (sigma <= lk) & (alpha >= threshold)
-                    gdot = (st[o_gc + p] * c0 + st[o_gc + uint64(NPX) + p] * c1 + st[o_gc + uint64(2 * NPX) + p] * c2
-                            + st[o_gc + uint64(3 * NPX) + p] * c3 + st[o_extra + p])
-                    Tp = st[p]  # F_T / B_T: slot 0
-                    wp = alpha * Tp
-                    fr = st[o_front + p] + gdot * wp
-                    one_m = 1.0 - alpha
-                    dl_dalpha = Tp * gdot + (st[o_ga + p] * st[o_tfin + p] - (st[o_total + p] - fr)) / one_m
-                    st[o_front + p] = fr if hit else st[o_front + p]
-                    st[p] = Tp * one_m if hit else Tp
-                    st[o_w + p] = wp if hit else 0.0
-                    grad = hit & (raw <= ALPHA_MAX)
-                    st[o_ds + p] = -dl_dalpha * alpha if grad else 0.0
-                    st[o_do + p] = dl_dalpha * vis if grad else 0.0
+                if wn == QUARTER:
+                    _bwd_row(st, lanes, base + ws, ws, x0 + ws, QUARTER, mx, dy, a, b, c, o, lk, threshold, kf,
+                             c0, c1, c2, c3)
+                elif wn == HALF:
+                    _bwd_row(st, lanes, base + ws, ws, x0 + ws, HALF, mx, dy, a, b, c, o, lk, threshold, kf,
+                             c0, c1, c2, c3)
+                else:
+                    _bwd_row(st, lanes, base, 0, x0, TILE, mx, dy, a, b, c, o, lk, threshold, kf, c0, c1, c2, c3)
                 if extra_used:  # the slot is zero for the next Gaussian
-                    st[B_EXTRA * NPX + base:B_EXTRA * NPX + base + TILE] = 0.0
-                # per-lane sums (two buffers: the row loop above stays free of aliasing checks)
-                for i in range(TILE):
-                    p = uint64(base + i)
-                    q = uint64(i)
-                    dx = mx - (x0 + i + PIXEL_CENTER_OFFSET)
-                    ds = st[o_ds + p]
-                    wq = st[o_w + p]
-                    lanes[q] += ds * (a * dx + b * dy)
-                    lanes[uint64(TILE) + q] += ds * (c * dy + b * dx)
-                    lanes[uint64(2 * TILE) + q] += 0.5 * dx * dx * ds
-                    lanes[uint64(3 * TILE) + q] += dx * dy * ds
-                    lanes[uint64(4 * TILE) + q] += 0.5 * dy * dy * ds
-                    lanes[uint64(5 * TILE) + q] += st[o_do + p]
-                    lanes[uint64(6 * TILE) + q] += wq * st[o_gc + p]
-                    lanes[uint64(7 * TILE) + q] += wq * st[o_gc + uint64(NPX) + p]
-                    lanes[uint64(8 * TILE) + q] += wq * st[o_gc + uint64(2 * NPX) + p]
-                    lanes[uint64(9 * TILE) + q] += wq * st[o_gc + uint64(3 * NPX) + p]
+                    st[B_EXTRA * NPX + base + ws:B_EXTRA * NPX + base + ws + wn] = 0.0
                 for ch in range(FUSED_CHANNELS, C):
-                    for i in range(TILE):
+                    for i in range(ws, ws + wn):
                         p = base + i
                         lanes[(6 + ch) * TILE + i] += st[B_W * NPX + p] * st[(B_GC + ch) * NPX + p]
             i0 = px0 - x0

@@ -120,6 +120,44 @@ def test_kernels_match_baseline(kind, n, width, height, dtype, seed):
         assert float((T <= 1e-2).mean()) > 0.5  # most pixels terminate early
 
 
+def test_every_row_window_matches_the_baseline():
+    """Boxes one to sixteen pixels wide at every column of their tile, so each of the row windows
+    (a quarter, half or whole tile row, its start clamped at the tile's right edge) runs, in float64:
+    the same images and gradient rows as the pixel-outer baseline, which evaluates every pixel."""
+    width, height = 48, 40
+    rng = np.random.default_rng(11)
+    n = 600
+    means = np.stack([rng.uniform(0.0, width, n), rng.uniform(0.0, height, n)], 1)
+    sd = np.exp(rng.uniform(-1.5, 1.2, (n, 2)))  # boxes of 1 to about 16 pixels
+    conics = np.stack([1.0 / sd[:, 0] ** 2, np.zeros(n), 1.0 / sd[:, 1] ** 2], 1)
+    opac = rng.uniform(0.05, 0.99, n)
+    colors = rng.uniform(0.0, 1.0, (n, 4))
+    groups = rng.integers(-1, N_GROUPS, n)
+    radii = np.ceil(3.33 * sd).astype(np.int64)
+    depths = rng.uniform(1.0, 50.0, n)
+    windows = set()
+    for i in range(n):
+        lim = kernels.sigma_limit(opac[i], THRESHOLD)
+        hx, _ = kernels.ellipse_half_extent(conics[i, 0], conics[i, 1], conics[i, 2], lim)
+        x0 = int(means[i, 0] // kernels.TILE) * kernels.TILE
+        px0, px1 = kernels.pixel_span(means[i, 0], hx, x0, min(x0 + kernels.TILE, width))
+        if px1 > px0:
+            ws, wn = kernels._row_window(px0, px1, x0)
+            assert ws <= px0 - x0 and px1 - x0 <= ws + wn <= kernels.TILE  # the window holds the box
+            windows.add((wn, ws == kernels.TILE - wn and px0 - x0 > ws))
+    assert {(kernels.QUARTER, True), (kernels.HALF, True), (kernels.QUARTER, False), (kernels.HALF, False),
+            (kernels.TILE, False)} <= windows
+    offsets, ids, tiles_x = bins_of(means, radii, depths, width, height)
+    args = kernel_args(means, conics, opac, colors, groups, offsets, ids, tiles_x, width, height, np.float64)
+    out = forward(kernels, args)
+    out_b = forward(kernels_baseline, args)
+    np.testing.assert_array_equal(out[3], out_b[3])
+    for got, want in zip(out[:3], out_b[:3]):
+        np.testing.assert_allclose(got, want, atol=1e-12, rtol=0)
+    for got, want in zip(backward(kernels, args, out_b, 0), backward(kernels_baseline, args, out_b, 0)):
+        np.testing.assert_allclose(got, want, atol=1e-12 * max(1.0, float(np.abs(want).max())), rtol=0)
+
+
 def test_box_holds_every_pixel_the_rule_keeps():
     """Pixels outside a Gaussian's box have sigma above its limit (the rule skips them)."""
     rng = np.random.default_rng(3)
