@@ -76,6 +76,10 @@ def add_commands(sub) -> None:
     p.add_argument("--densify-until", type=unit_fraction, metavar="F",
                    help="stop densifying at this fraction of the iterations "
                         f"(default {default_of(ReconstructConfig, 'densify_until_fraction')})")
+    p.add_argument("--importance-prune", type=unit_fraction, metavar="F",
+                   help="when densifying stops, remove this fraction of each part's Gaussians, those that paint the "
+                        "least of the training views, so that every later step composites fewer; 0: none "
+                        f"(default {default_of(ReconstructConfig, 'importance_prune')})")
     p.add_argument("--max-init-points", type=positive_int, help="point-cloud subset to start from "
                    f"(default {default_of(ReconstructConfig, 'max_init_points')})")
     p.add_argument("--seed", type=seed_int,
@@ -116,7 +120,7 @@ def _reconstruct(args) -> int:
     check_files(manifest)
     cfg = ReconstructConfig(**given(args, "iters", "sh_degree", "sh_every", "resolution_schedule", "depth_weight",
                                     "max_init_points", "seed", "exposure", "vehicle_alpha_weight", "driving_view_repeat",
-                                    densify_until_fraction="densify_until"))
+                                    "importance_prune", densify_until_fraction="densify_until"))
     cfg.densify = replace(cfg.densify, **given(args, "max_gaussians"))
     cfg.pose_refine = replace(cfg.pose_refine, **given(args, enabled="refine_poses"))
     cfg.camera_refine = replace(cfg.camera_refine, **given(args, enabled="refine_cameras"))

@@ -127,6 +127,10 @@ class ReconstructConfig:
     densify_until_fraction: float = 0.6
     densify_every: int = 100
     densify: DensifyConfig = field(default_factory=DensifyConfig)
+    # When density control ends, this fraction of each part's Gaussians, those that paint the least
+    # of the training views (their blending weights summed, :mod:`.importance`), is removed: every
+    # later step composites fewer. 0: none.
+    importance_prune: float = 0.0
     holdout_every: int = 5  # used when the package does not name its held-out frames
     checkpoint_every: int = 500
     seed: int = 0

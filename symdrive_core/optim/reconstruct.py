@@ -37,7 +37,7 @@ from ..scene.ground_truth import fitting_split
 from ..scene.poses import travels
 from ..shadows.layer import ShadowLayer
 from ..splat.render import Layer, activate, params_from_gaussians, render_layers, render_params
-from . import decompose, pose_refine
+from . import decompose, importance, pose_refine
 from .camera_refine import (
     CameraRefinement,
     corrected_layers,
@@ -199,7 +199,7 @@ def depth_loss(info: dict, alpha: torch.Tensor, target: torch.Tensor | None) -> 
 
 # What a resumed fit must share with the one it resumes: options that shape the fit from its start.
 RESUME_FIELDS = ("sh_degree", "decompose", "seed", "actor_max_gaussians", "driving_view_repeat", "exposure",
-                 "densify.max_gaussians")
+                 "densify.max_gaussians", "importance_prune")
 
 
 def _same_fit(saved: dict, now: dict, path: Path) -> None:
@@ -438,6 +438,9 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
                                            generator)
                 counts["pruned"] += _keep(part, keep)
                 log["densify"].append({"iteration": step, "part": part.name, **counts})
+        if step == densify_until and cfg.importance_prune > 0:
+            log["importance_prune"] = _prune_least_important(parts, levels.at(factor), degree, cameras,
+                                                             cfg.importance_prune)
         if step % 20 == 0:
             bar.set_postfix(loss=f"{loss.item():.4f}", n=sum(len(p.params["means"]) for p in parts))
         if step % cfg.checkpoint_every == 0 or step == cfg.iters:
@@ -455,6 +458,20 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
         log["pruned_at_end"] = {part.name: _keep(part, keep) for part in parts}
     log["seconds"] = time.perf_counter() - t0
     return log
+
+
+def _prune_least_important(parts: list[Part], views: list[View], degree: int, cameras, fraction: float) -> dict:
+    """Remove ``fraction`` of each part's Gaussians that paint the least of ``views`` (the sensor
+    dome, fixed in place, keeps its own); how many each part lost."""
+    pruned = {}
+    for part, weights in zip(parts, importance.blending_weights(parts, views, degree, cameras), strict=True):
+        if part.fixed:
+            continue
+        drop = importance.least_important(weights, fraction)
+        prune(part.opt, part.params, ~drop)
+        part.stats.reset(len(part.params["means"]))
+        pruned[part.name] = int(drop.sum())
+    return pruned
 
 
 def _keep(part: Part, keep) -> int:

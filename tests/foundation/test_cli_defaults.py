@@ -63,6 +63,7 @@ def _help(command: str) -> str:
     ("run", "--max-memory", f"{StageOptions().sampler.max_memory_gib:g}"),
     ("reconstruct", "--max-gaussians", ReconstructConfig().densify.max_gaussians),
     ("reconstruct", "--iters", ReconstructConfig().iters),
+    ("reconstruct", "--importance-prune", f"{ReconstructConfig().importance_prune:g}"),
     ("train-restorer", "--ema", TrainConfig().ema),
 ])
 def test_help_prints_the_config_value(command, flag, value):
