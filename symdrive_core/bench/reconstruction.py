@@ -28,6 +28,9 @@ SCHEDULES = {
     # densification's cap halved: a real drive reaches the default's 200k by 60 % of the iterations
     "coarse to fine, 100k Gaussians": {"resolution_schedule": COARSE_TO_FINE,
                                        "densify": DensifyConfig(max_gaussians=100_000)},
+    # the 60 % of each part's Gaussians that paint the least removed when densification ends
+    "coarse to fine, pruned 0.6": {"resolution_schedule": COARSE_TO_FINE, "importance_prune": 0.6},
+    "full resolution, pruned 0.6": {"resolution_schedule": (), "importance_prune": 0.6},
 }
 
 

@@ -57,6 +57,9 @@ def test_curves_score_each_schedule_every_k_iterations_and_write_the_figure(pack
         assert [r["iteration"] for r in mine] == [0, 20, 40]
         assert mine[0]["seconds"] == 0.0 < mine[1]["seconds"] < mine[2]["seconds"]
         assert mine[-1]["psnr"] > mine[0]["psnr"]
+    last = {r["schedule"]: r["gaussians"] for r in rows if r["iteration"] == 40}
+    for plain in ("coarse to fine", "full resolution"):  # pruned when densification ended
+        assert last[f"{plain}, pruned 0.6"] < 0.5 * last[plain]
     s = bench.summary(rows, bench.default_name(configs, bench.training_pixels(package)))
     paths = bench.write_outputs(rows, s, configs, tmp_path, "synthetic")
     assert json.loads(paths["json"].read_text())["configs"]["coarse to fine"]["resolution_schedule"] == [0.1, 0.3]
