@@ -5,6 +5,8 @@ The fits advance in turns of ``every`` iterations, so a machine that slows down 
 every schedule alike, and each is scored on the package's held-out frames between its turns; the
 seconds are the training alone (scoring excluded). From the curves: how long each schedule takes
 to reach the held-out PSNR the default schedule ends at, as a ratio of the default's whole time.
+Schedules that differ only in the fraction pruned (``importance_prune``) are one fit until the
+prune, so they share it to there.
 """
 
 from __future__ import annotations
@@ -81,7 +83,14 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
 
     from ..optim.reconstruct import Fit
 
-    fits = {name: Fit.start(manifest, cfg) for name, cfg in configs.items()}
+    # Schedules that differ only in the fraction pruned are the same fit until the prune: one trunk
+    # fit trains to the last scoring before it (standing in for each), then each gets a copy.
+    trunks: dict[str, list[str]] = {}
+    for name, cfg in configs.items():
+        trunks.setdefault(repr(replace(cfg, importance_prune=0.0)), []).append(name)
+    branches = {names[0]: (names, max(0, (configs[names[0]].densify_end - 1) // every * every))
+                for names in trunks.values() if len(names) > 1}
+    fits = {name: Fit.start(manifest, configs[name]) for names in trunks.values() for name in names[:1]}
     seconds = dict.fromkeys(fits, 0.0)
     rows = []
 
@@ -91,15 +100,29 @@ def curves(manifest, configs: dict[str, ReconstructConfig], every: int, progress
                      "psnr": q["psnr_heldout"], "ssim": q["ssim_heldout"],
                      "gaussians": sum(len(p.params["means"]) for p in fit.parts)})
 
+    def branch(names: list[str], trunk: Fit) -> None:
+        """The trunk's rows and state for each of ``names`` (the first keeps the trunk itself)."""
+        mine = [r for r in rows if r["schedule"] == names[0]]
+        for name in names[1:]:
+            fits[name] = copy.deepcopy(trunk)
+            seconds[name] = seconds[names[0]]
+            rows.extend(dict(r, schedule=name) for r in mine)
+        for name in names:
+            fits[name].cfg = replace(trunk.cfg, importance_prune=configs[name].importance_prune)
+
     for name, fit in fits.items():
         score(name, fit)
     bar = tqdm(total=sum(c.iters for c in configs.values()), desc="bench reconstruct", unit="it", disable=not progress)
     while any(f.iteration < f.cfg.iters for f in fits.values()):
+        for name, fit in list(fits.items()):
+            if name in branches and fit.iteration == branches[name][1]:
+                branch(branches.pop(name)[0], fit)
         for name, fit in fits.items():
             if fit.iteration < fit.cfg.iters:
                 before = fit.iteration
-                seconds[name] += fit.train(until=before + every, progress=False)["seconds"]
-                bar.update(fit.iteration - before)
+                step = min(every, branches[name][1] - before) if name in branches else every
+                seconds[name] += fit.train(until=before + step, progress=False)["seconds"]
+                bar.update((fit.iteration - before) * (len(branches[name][0]) if name in branches else 1))
                 score(name, fit)
     bar.close()
     return rows

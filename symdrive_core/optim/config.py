@@ -163,6 +163,11 @@ class ReconstructConfig:
     exposure: str = "camera"
     lr_exposure: float = 1e-3
 
+    @property
+    def densify_end(self) -> int:
+        """The step at which density control stops (and the least important Gaussians go)."""
+        return int(self.densify_until_fraction * self.iters)
+
     def schedule_for(self, pixels: int) -> tuple[float, ...]:
         """The resolution schedule a fit of images of ``pixels`` pixels (the largest) trains with."""
         if self.resolution_schedule is not None:

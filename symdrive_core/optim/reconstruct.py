@@ -373,7 +373,7 @@ def fit_parts(views: list[View] | Levels, parts: list[Part], cfg: ReconstructCon
     n_views = len(levels.views)
     pool = view_pool(levels.views, parts, cfg)
     until = cfg.iters if until is None else min(until, cfg.iters)
-    densify_until = int(cfg.densify_until_fraction * cfg.iters)
+    densify_until = cfg.densify_end
     depth_weight = cfg.depth_weight or 0.0  # None, not resolved for a camera (renders, as cycles fit): off
     refining = [p.refine for p in parts if p.refine is not None]
     extras = [x for x in (shadows, exposure, cameras) if x is not None]  # fitted beside the Gaussians

@@ -3,6 +3,7 @@
 
 import copy
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -65,6 +66,25 @@ def test_curves_score_each_schedule_every_k_iterations_and_write_the_figure(pack
     assert json.loads(paths["json"].read_text())["configs"]["coarse to fine"]["resolution_schedule"] == [0.1, 0.3]
     assert paths["csv"].read_text().startswith("schedule,iteration,seconds,psnr,ssim,gaussians")
     assert read_image(paths["png"]).ndim == 3
+
+
+def test_schedules_that_differ_in_the_prune_share_one_fit_until_it(package, monkeypatch):
+    """The copies continue exactly as fits of their own would."""
+    from symdrive_core.optim import reconstruct
+
+    plain = ReconstructConfig(iters=40, **TINY)
+    pruned = replace(plain, importance_prune=0.5)
+    alone = bench.curves(package, {"pruned": pruned}, every=15, progress=False)
+    starts = []
+    start = reconstruct.Fit.start
+    monkeypatch.setattr(reconstruct.Fit, "start", staticmethod(lambda m, cfg: starts.append(cfg) or start(m, cfg)))
+    rows = bench.curves(package, {"plain": plain, "pruned": pruned}, every=15, progress=False)
+    assert len(starts) == 1 and plain.densify_end == 24  # one fit to iteration 15, copied there
+    shared = [{k: r[k] for k in ("iteration", "psnr", "ssim", "gaussians")} for r in rows if r["schedule"] == "pruned"]
+    assert shared == [{k: r[k] for k in ("iteration", "psnr", "ssim", "gaussians")} for r in alone]
+    assert [r["iteration"] for r in shared] == [0, 15, 30, 40]
+    ends = {r["schedule"]: r["gaussians"] for r in rows if r["iteration"] == 40}
+    assert ends["pruned"] < 0.6 * ends["plain"]
 
 
 def test_accuracy_time_rows_fit_a_shared_setting_once(package, monkeypatch):
