@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views, named_file
 from .package import Source
 
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -111,7 +111,8 @@ def read_colmap(model_dir: str | Path, images: str | Path | None, *, splats: str
             raise InputError(img_file, f"camera_id {im.camera_id} is not in {cam_file.name}", where)
         K, w, h = Ks[im.camera_id]
         views.append(View(name=im.name, K=K, width=w, height=h, c2w=conventions.invert_rigid(w2c),
-                          source=img_file, where=where, image=None if images is None else images / im.name,
+                          source=img_file, where=where,
+                          image=None if images is None else named_file(images, im.name, img_file, where),
                           camera_id=str(im.camera_id)))
     if not views:
         raise InputError(img_file, "empty model: no registered images", "images")

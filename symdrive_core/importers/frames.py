@@ -24,7 +24,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ..errors import InputError
-from ..scene.paths import check_name
+from ..scene.paths import check_name, escapes, is_absolute_text
 
 DEFAULT_CAMERA = "front"  # the package camera's name when the source has one camera
 DEFAULT_FPS = 10.0  # frame rate for timestamps when the source has none
@@ -54,8 +54,26 @@ class Grouped:
     left_out: list[View] = field(default_factory=list)  # images of frames not every camera recorded
 
 
+def named_file(root: Path, name: str, path: Path, where: str) -> Path:
+    """``root / name`` for a file a record names (an image, a point cloud), relative to ``root``: a
+    record is data, so a name that is absolute or climbs out of ``root`` with ``..`` is refused
+    (an :class:`InputError` naming ``path`` and ``where``), never followed."""
+    if is_absolute_text(name) or escapes(name):
+        raise InputError(path, f"{name!r} lies outside {root}; names in the file are relative to it", where)
+    return Path(root) / name
+
+
+def in_order(grouped: Grouped, cameras) -> Grouped:
+    """``grouped`` with its cameras in the order chosen (``group_views`` sorts them by name): the
+    first named is the package's first camera, as a dataset importer's ``--cameras`` promises."""
+    order = [grouped.cameras.index(c) for c in cameras]
+    grouped.cameras = [grouped.cameras[i] for i in order]
+    grouped.table = [grouped.table[i] for i in order]
+    return grouped
+
+
 def natural_key(text: str):
-    return [(0, int(t), "") if t.isdigit() else (1, 0, t) for t in re.split(r"(\d+)", text) if t]
+    return [(0, int(t), "") if t.isdecimal() else (1, 0, t) for t in re.split(r"(\d+)", text) if t]
 
 
 def frame_times(keys: list[str], fps: float) -> list[float]:

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views, named_file
 from .package import Source
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".exr", ".tif", ".tiff")
@@ -83,17 +83,20 @@ def read_views(model: str | Path, images: str | Path | None) -> list[View]:
         raise InputError(cams_path, "file not found (expected the 3DGS trainer's output folder)", "cameras.json")
     try:
         cams = json.loads(cams_path.read_text(encoding="utf-8-sig"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, RecursionError, ValueError) as exc:  # ValueError: JSON's, a number of thousands of digits
         raise InputError(cams_path, f"not valid JSON: {exc}") from None
     if not isinstance(cams, list):
         raise InputError(cams_path, "expected a list of cameras", "(root)")
     if not cams:
         raise InputError(cams_path, "empty: no cameras", "(root)")
-    cfg = read_cfg_args(model / "cfg_args") if (model / "cfg_args").is_file() else {}
     if images is None:
+        cfg = read_cfg_args(model / "cfg_args") if (model / "cfg_args").is_file() else {}
         if "source_path" not in cfg:
             raise InputError(model / "cfg_args", "no source_path to find the images in; pass --images DIR",
                              "source_path")
+        for key, value in (("source_path", cfg["source_path"]), ("images", cfg.get("images", "images"))):
+            if not isinstance(value, str) or not value:
+                raise InputError(model / "cfg_args", f"expected a folder's path, got {value!r}", key)
         images = Path(cfg["source_path"]) / cfg.get("images", "images")
     images = Path(images)
     views = []
@@ -108,7 +111,7 @@ def read_views(model: str | Path, images: str | Path | None) -> list[View]:
             pos = np.asarray(c["position"], dtype=np.float64).reshape(3)
             rot = np.asarray(c["rotation"], dtype=np.float64).reshape(3, 3)
             fx, fy, w, h = float(c["fx"]), float(c["fy"]), int(c["width"]), int(c["height"])
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise InputError(cams_path, "expected position [3], rotation [3][3], numeric fx, fy, width, height",
                              where) from None
         c2w = np.eye(4)
@@ -116,6 +119,7 @@ def read_views(model: str | Path, images: str | Path | None) -> list[View]:
         if not np.all(np.isfinite(c2w)):
             raise InputError(cams_path, "pose is not finite (NaN or Inf)", f"{where}.position")
         name = str(c["img_name"])
+        named_file(images, name, cams_path, f"{where}.img_name")
         image = _find_image(images, name)
         views.append(View(name=image.name if image.is_file() else name, K=conventions.intrinsics(fx, fy, w / 2.0, h / 2.0),
                           width=w, height=h, c2w=c2w, source=cams_path, where=f"{where} ({name})", image=image,

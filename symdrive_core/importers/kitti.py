@@ -87,7 +87,7 @@ def _frames(folder: Path) -> dict[int, Path]:
     """Frame number -> image, for the images named by number."""
     out = {}
     for p in folder.iterdir():
-        if p.suffix.lower() in IMAGE_SUFFIXES and p.stem.isdigit():
+        if p.suffix.lower() in IMAGE_SUFFIXES and p.stem.isdecimal():
             out[int(p.stem)] = p
     if not out:
         raise InputError(folder, "no images named by frame number (000000.png, ...)", "images")

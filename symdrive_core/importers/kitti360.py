@@ -46,12 +46,12 @@ from .. import conventions
 from ..errors import InputError
 from ..scene.paths import check_name
 from .calib_text import finite_numbers, read_small_text, rigid_transform
-from .frames import DEFAULT_FPS, group_views
+from .frames import DEFAULT_FPS, group_views, in_order
 from .kitti360_boxes import DEFAULT_TYPES, Kitti360Box, box_tracks, read_boxes
 from .kitti_calib import labelled_rigid, read_labels, rectified_camera
 from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, rig_views
 from .lidar import LidarConfig, list_scans, seen_returns
-from .package import Source
+from .package import Source, check_image
 
 CAMERAS = (0, 1)  # the perspective pair
 IMAGES = "data_rect"
@@ -253,12 +253,14 @@ def read_kitti360(root: str | Path, sequence: str, config: Kitti360Config = Kitt
     views, time_origin = rig_views(seq, IMAGES, rig, names, images, world_from_rect0,
                                    {i: rig[i].rect0_from_camera for i in cameras},
                                    [(pose_path, posed[int(n)][1]) for n in names])
-    grouped = group_views(views, camera_name=first, fps=fps)
+    grouped = in_order(group_views(views, camera_name=first, fps=fps), [camera_name(i) for i in cameras])
     scans, points, colors, point_frames = None, None, None, None
     if scans_dir.is_dir():
         scans = _scans(scans_dir, names, len(images[cameras[0]]), first)
         cam = rig[cameras[0]]
         world_from_velo = world_from_rect0 @ cam.rect0_from_camera @ cam.velo_to_camera
+        for v in views:  # read for their colours before the package checks them
+            check_image(v.image, v.width, v.height, v.source, v.where)
         points, colors, point_frames = seen_returns(
             scans, world_from_velo, [cam.velo_to_camera] * len(scans), cam.K, cam.width, cam.height,
             [images[cameras[0]][n] for n in names], config.lidar_points, config.lidar.min_depth_m)

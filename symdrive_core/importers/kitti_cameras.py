@@ -43,7 +43,7 @@ def camera_frames(drive: Path, cameras: tuple[int, ...], sub: str) -> dict[int, 
         folder = drive / camera_name(i) / sub
         if not folder.is_dir():
             raise InputError(folder, f"no images of KITTI camera {i}", "--cameras")
-        out[i] = {p.stem: p for p in folder.iterdir() if p.suffix.lower() == ".png" and p.stem.isdigit()}
+        out[i] = {p.stem: p for p in folder.iterdir() if p.suffix.lower() == ".png" and p.stem.isdecimal()}
         if not out[i]:
             raise InputError(folder, "no images named by frame number (0000000000.png, ...)", "images")
     first = cameras[0]

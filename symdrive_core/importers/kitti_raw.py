@@ -34,12 +34,12 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import DEFAULT_FPS, group_views
+from .frames import DEFAULT_FPS, group_views, in_order
 from .kitti_calib import RAW_CAM_TO_CAM, layout_of, raw_rigid, read_labels, rectified_camera, velo_to_camera
 from .kitti_cameras import RectifiedCamera, camera_frames, camera_name, clock_lag, rig_views
 from .lidar import LidarConfig, list_scans, seen_returns
 from .oxts import carried, imu_poses, read_record
-from .package import Source
+from .package import Source, check_image
 from .tracklets import Tracklet, read_tracklets
 from .tracks import TracksConfig
 
@@ -151,7 +151,8 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
     views, time_origin = rig_views(drive, "data", rig, names, images, world_from_imu,
                                    {i: conventions.invert_rigid(rig[i].imu_to_camera) for i in cameras},
                                    [(p, 1) for p in oxts])
-    grouped = group_views(views, camera_name=camera_name(cameras[0]), fps=fps)
+    grouped = in_order(group_views(views, camera_name=camera_name(cameras[0]), fps=fps),
+                       [camera_name(i) for i in cameras])
     first = rig[cameras[0]]
     scans_dir, points, colors, point_frames = drive / SCANS, None, None, None
     if scans_dir.is_dir():
@@ -162,6 +163,8 @@ def read_kitti_raw(drive: str | Path, config: KittiRawConfig = KittiRawConfig(),
                              f"/data (frame {missing[0] if missing else '?'}): expected one scan per image, named "
                              "as it", "velodyne_points")
         world_from_velo = world_from_imu @ conventions.invert_rigid(first.imu_to_camera) @ first.velo_to_camera
+        for v in views:  # read for their colours before the package checks them
+            check_image(v.image, v.width, v.height, v.source, v.where)
         points, colors, point_frames = seen_returns(
             scans, world_from_velo, [first.velo_to_camera] * len(scans), first.K, first.width, first.height,
             [images[cameras[0]][n] for n in names], config.lidar_points, config.lidar.min_depth_m)

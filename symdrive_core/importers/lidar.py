@@ -54,6 +54,8 @@ def read_scan(path: Path) -> np.ndarray:
             (16, "KITTI records (float32 x, y, z, reflectance)")
         if size % record:
             raise InputError(path, f"{size} bytes is not a whole number of {fields}", "points")
+        if not size:
+            raise InputError(path, f"0 bytes: no {fields} (a scan cut off in copying?)", "points")
         points = np.fromfile(path, dtype="<f4").reshape(-1, record // 4)[:, :3]
     elif suffix == ".npz":
         points = _npz_points(path)

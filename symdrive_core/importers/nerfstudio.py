@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import conventions
 from ..errors import InputError
-from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views
+from .frames import DEFAULT_CAMERA, DEFAULT_FPS, View, group_views, named_file
 from .package import Source
 
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -77,7 +77,7 @@ def read_views(transforms: str | Path, *, undistort: bool = False) -> tuple[Path
         data = json.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise InputError(path, "file not found", "transforms.json") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, RecursionError, ValueError) as exc:  # ValueError: JSON's, a number of thousands of digits
         raise InputError(path, f"not valid JSON: {exc}") from None
     if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
         raise InputError(path, "expected an object with a 'frames' list", "frames")
@@ -132,7 +132,8 @@ def read_views(transforms: str | Path, *, undistort: bool = False) -> tuple[Path
         if name.startswith("./"):
             name = name[2:]
         views.append(View(name=name, K=K, width=int(intr["w"]), height=int(intr["h"]), c2w=c2w, source=path,
-                          where=where, image=base / fp, timestamp=None if t is None else float(t), lens=lens))
+                          where=where, image=named_file(base, fp, path, f"{where}.file_path"),
+                          timestamp=None if t is None else float(t), lens=lens))
     # Views' folder layout is {camera}/{frame} when the dataset has one folder per camera; a single
     # images/ folder is one camera.
     if views and all(v.name.startswith("images/") for v in views):
@@ -150,9 +151,10 @@ def read_nerfstudio(transforms: str | Path, *, splats: str | Path | None = None,
     if isinstance(ply, str) and ply:
         from ..io.points import read_points
 
-        if not (base / ply).is_file():
+        ply_path = named_file(base, ply, path, "ply_file_path")
+        if not ply_path.is_file():
             raise InputError(path, f"file not found: {ply}", "ply_file_path")
-        p, c = read_points(base / ply)
+        p, c = read_points(ply_path)
         points, colors = p.astype(np.float64), c.astype(np.float64)
     g = None
     if splats is not None:

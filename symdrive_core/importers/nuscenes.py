@@ -39,7 +39,7 @@ import numpy as np
 from .. import conventions
 from ..errors import InputError
 from ..scene.manifest import WLH_MAX
-from .frames import View, group_views
+from .frames import View, group_views, in_order
 from .lidar import LidarConfig, seen_returns
 from .nuscenes_tables import Table, Tables
 from .package import Source, check_image
@@ -177,14 +177,6 @@ def _camera_view(tables: Tables, dataroot: Path, token: str, channel: str, sampl
                 image=sd.file(token, "filename", dataroot), timestamp=(sd.integer(token, "timestamp") - t0) * US)
 
 
-def _in_order(grouped, cameras: tuple[str, ...]):
-    """``grouped`` with its cameras in the order chosen (group_views sorts them by name)."""
-    order = [grouped.cameras.index(c) for c in cameras]
-    grouped.cameras = [grouped.cameras[i] for i in order]
-    grouped.table = [grouped.table[i] for i in order]
-    return grouped
-
-
 def _category(tables: Tables, annotation: str) -> tuple[str, str]:
     """(instance token, category name) of a sample_annotation."""
     instance, _ = tables.follow(tables["sample_annotation"], annotation, "instance_token", "instance")
@@ -246,7 +238,7 @@ def read_nuscenes(dataroot: str | Path, scene: str, config: NuScenesConfig = NuS
     views = [_camera_view(tables, dataroot, _keyframe(sd, keyframes, s, channel, "--cameras"), channel, s,
                           several, t0)
              for channel in config.cameras for s in samples]
-    grouped = _in_order(group_views(views, camera_name=config.cameras[0]), tuple(config.cameras))
+    grouped = in_order(group_views(views, camera_name=config.cameras[0]), tuple(config.cameras))
     frames = {name: fi for fi, name in enumerate(grouped.frame_keys)}
     scans, points, colors, point_frames, to_camera = None, None, None, None, {}
     if any(LIDAR in keyframes[s] for s in samples):

@@ -51,6 +51,8 @@ class Table:
         from ..scene import is_inside
 
         rel = self.text(token, key)
+        if "\x00" in rel:
+            self.fail(token, key, f"{rel!r} holds a NUL byte: no file has that name")
         full = Path(root) / rel
         if not rel or Path(rel).is_absolute() or not is_inside(full, root):
             self.fail(token, key, f"{rel!r} lies outside DATAROOT {root}")

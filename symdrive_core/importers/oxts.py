@@ -29,6 +29,7 @@ from .calib_text import finite_numbers
 
 FIELDS = 30  # numbers per record
 EARTH_RADIUS_M = 6378137.0  # the devkit's er
+ALTITUDE_MAX_M = 1e5  # above it no vehicle drives; a fix past it is a corrupt record
 RECORD_BYTES_MAX = 1 << 16  # a record is one line of about 250 characters
 VELOCITY = slice(8, 11)  # vf, vl, vu: m/s along the IMU's forward, left and up axes
 ANGULAR_RATE = slice(20, 23)  # wf, wl, wu: rad/s about the same axes
@@ -47,7 +48,12 @@ def read_record(path: Path) -> np.ndarray:
         raise InputError(path, f"not UTF-8 text (byte {exc.start})", "line 1") from None
     if len(lines) != 1:
         raise InputError(path, f"expected one line of {FIELDS} numbers, got {len(lines)} lines", "line 1")
-    return finite_numbers(lines[0], FIELDS, path, "line 1")
+    record = finite_numbers(lines[0], FIELDS, path, "line 1")
+    lat, lon, alt = record[:3]
+    if not (-90.0 < lat < 90.0 and -180.0 <= lon <= 180.0 and abs(alt) <= ALTITUDE_MAX_M):
+        raise InputError(path, f"lat, lon, alt {lat:g} {lon:g} {alt:g} is no fix on Earth (latitude in (-90, 90), "
+                         f"longitude in [-180, 180] degrees, |altitude| <= {ALTITUDE_MAX_M:g} m)", "line 1")
+    return record
 
 
 def euler_rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,6 +76,22 @@ def check_image(image: Path, width: int, height: int, source: Path, where: str) 
     w, h, _ = image_size(image, where)
     if (w, h) != (width, height):
         raise InputError(image, f"image is {w}x{h}, the camera ({source}: {where}) is {width}x{height}", where)
+    if _truncated_png(image):
+        raise InputError(image, "truncated: a PNG without its end chunk (IEND), as a copy cut off writes it", where)
+
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_END = b"IEND\xaeB`\x82"  # the end chunk's type and CRC: the last 8 bytes of a whole PNG
+
+
+def _truncated_png(image: Path) -> bool:
+    """A PNG whose last KB holds no end chunk: its header reads, its pixels run out (a header
+    check alone lets it into the package, and the first reader of its pixels fails)."""
+    with open(image, "rb") as f:
+        if f.read(len(PNG_SIGNATURE)) != PNG_SIGNATURE:
+            return False
+        f.seek(max(f.seek(0, os.SEEK_END) - 1024, 0))
+        return PNG_END not in f.read()
 
 
 def _check_images(g: Grouped, lateral: StereoTruth | None) -> None:
@@ -82,6 +99,20 @@ def _check_images(g: Grouped, lateral: StereoTruth | None) -> None:
         for v in row:
             if v.image is not None:
                 check_image(v.image, v.width, v.height, v.source, v.where)
+
+
+@contextmanager
+def _named_by_source(tmp: Path, source: Path):
+    """An error in the package being written (a value the source holds that no package may) named by
+    the source it came from: the temporary folder is gone when the user reads the message."""
+    try:
+        yield
+    except InputError as exc:
+        inside = Path(exc.path).resolve()
+        if not inside.is_relative_to(tmp.resolve()):
+            raise
+        field = exc.field or inside.relative_to(tmp.resolve()).as_posix()
+        raise InputError(source, f"{exc.message} (in the scene package made from this input)", field) from None
 
 
 def write_package(src: Source, opt: Options, progress: bool = True, extend=None) -> dict:
@@ -172,11 +203,12 @@ def write_package(src: Source, opt: Options, progress: bool = True, extend=None)
             data["ground_truth"]["lateral"] = [entry]
             data["effects"] = {"lateral_offsets": [entry["offset_m"]]}
             data["source"]["stereo"] = {"camera": src.lateral.name, "baseline_source_units": src.lateral.baseline}
-        m = parse_manifest(data, tmp / "manifest.json", allow_external=external)
-        m.save()
-        extended = None if extend is None else extend(tmp)
-        m = load_manifest(tmp, allow_external=external)
-        check_files(m)
+        with _named_by_source(tmp, src.path):
+            m = parse_manifest(data, tmp / "manifest.json", allow_external=external)
+            m.save()
+            extended = None if extend is None else extend(tmp)
+            m = load_manifest(tmp, allow_external=external)
+            check_files(m)
     return {"package": str(out), "frames": len(g.frame_keys), "cameras": g.cameras,
             "lateral_offset_m": None if src.lateral is None else data["effects"]["lateral_offsets"][0],
             "scale": record["scale"], "camera_height_m": record["camera_height_m"],

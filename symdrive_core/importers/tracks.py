@@ -198,6 +198,8 @@ def _json_track(fields: _Fields, t, where: str, frame: str) -> Track:
         if frame == "camera":
             centre, rotation = _from_kitti_axes(centre, rotation, wlh[2])
         boxes.append(Box(fi, centre, rotation, wb))
+    if not boxes:
+        fields.fail(f"{where}.boxes", f"track {tid!r} has no boxes: no frame says where it is")
     return Track(tid, wlh, boxes, f"{where}.id", tuple(f"{where}.{k}" for k in "wlh"))
 
 

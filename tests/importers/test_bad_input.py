@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -170,3 +171,100 @@ def test_an_existing_folder_is_replaced_only_when_a_package_and_asked(world, tmp
     rc, err = run_import(args, out, capsys)
     assert rc == 2 and "--force" in err and (out / "manifest.json").is_file()
     assert run_import([*args, "--force"], out, capsys)[0] == 0  # a package is replaced when asked
+
+
+# ---------------------------------------------------------------- names that lead out, odd files
+
+
+@pytest.mark.parametrize("name", ["../outside.png", "/etc/hostname", "sub/../../outside.png"])
+def test_a_colmap_image_name_leading_out_of_the_images_is_refused_not_read(world, tmp_path, capsys, name):
+    link_images(world, tmp_path / "m" / "images")
+    (tmp_path / "outside.png").write_bytes((tmp_path / "m" / "images" / "000000.png").read_bytes())
+    args = colmap_args(replace(world, names=[name, *world.names[1:]]), tmp_path / "m")
+    out = tmp_path / "pkg"
+    assert_refused(*run_import(args, out, capsys), out, "images.bin", "image_id 1", repr(name), "lies outside")
+
+
+@pytest.mark.parametrize("key, value, field", [
+    ("file_path", "../outside.png", "frames[0].file_path"),
+    ("file_path", "/etc/hostname", "frames[0].file_path"),
+    ("file_path", "images/a/../../../outside.png", "frames[0].file_path"),
+    ("ply_file_path", "/etc/passwd", "ply_file_path"),
+    ("ply_file_path", "../../outside.ply", "ply_file_path"),
+])
+def test_a_nerfstudio_path_leading_out_of_its_folder_is_refused_not_read(world, tmp_path, capsys, key, value, field):
+    def edit(d):
+        (d["frames"][0] if key == "file_path" else d)[key] = value
+
+    out = tmp_path / "pkg"
+    assert_refused(*run_import(_edit_ns(world, tmp_path, edit), out, capsys), out, "transforms.json", f": {field}: ",
+                   repr(value), "lies outside")
+
+
+def _gs_model(world, root, edit=None, cfg=None):
+    model = write_gs_output(world, root / "run", root / "data" / "images")
+    cams = json.loads((model / "cameras.json").read_text())
+    if edit is not None:
+        edit(cams)
+        (model / "cameras.json").write_text(json.dumps(cams))
+    if cfg is not None:
+        (model / "cfg_args").write_text(cfg)
+    return model
+
+
+@pytest.mark.parametrize("name", ["../../outside", "/etc/hostname"])
+def test_a_3dgs_img_name_leading_out_of_the_images_is_refused_not_read(world, tmp_path, capsys, name):
+    model = _gs_model(world, tmp_path, lambda cams: cams[0].update(img_name=name))
+    (tmp_path / "outside.png").write_bytes((tmp_path / "data" / "images" / "000001.png").read_bytes())
+    out = tmp_path / "pkg"
+    assert_refused(*run_import(["3dgs", str(model), "--images", str(tmp_path / "data" / "images")], out, capsys),
+                   out, "cameras.json", "[0].img_name", "lies outside")
+
+
+def test_json_nested_past_the_parser_is_refused(world, tmp_path, capsys):
+    tj = write_nerfstudio(world, tmp_path / "ns")
+    tj.write_text("[" * 100_000 + "]" * 100_000)
+    model = _gs_model(world, tmp_path)
+    (model / "cameras.json").write_text('{"a": [' + "1" * 5000 + "]}")  # a number past int()'s digits
+    for args, file in ((["nerfstudio", str(tj)], "transforms.json"), (["3dgs", str(model)], "cameras.json")):
+        out = tmp_path / f"pkg_{file}"
+        assert_refused(*run_import(args, out, capsys), out, file, "not valid JSON")
+
+
+def test_3dgs_size_past_float_range_and_cfg_args_without_paths_are_refused(world, tmp_path, capsys):
+    model = _gs_model(world, tmp_path / "a")
+    (model / "cameras.json").write_text((model / "cameras.json").read_text().replace('"width": ', '"width": 1e400, "w": ', 1))
+    out = tmp_path / "pkg"
+    assert_refused(*run_import(["3dgs", str(model), "--images", str(tmp_path / "a" / "data" / "images")], out, capsys),
+                   out, "cameras.json", "[0]")
+    model = _gs_model(world, tmp_path / "b", cfg="Namespace(source_path=5, images='images')")
+    assert_refused(*run_import(["3dgs", str(model)], out, capsys), out, "cfg_args", ": source_path: ", "got 5")
+    model = _gs_model(world, tmp_path / "c", cfg="Namespace(source_path='/data', images=None)")
+    assert_refused(*run_import(["3dgs", str(model)], out, capsys), out, "cfg_args", ": images: ", "got None")
+
+
+def test_cfg_args_is_not_read_when_images_are_given(world, tmp_path, capsys):
+    model = _gs_model(world, tmp_path, cfg="not a Namespace (((")
+    rc, err = run_import(["3dgs", str(model), "--images", str(tmp_path / "data" / "images")], tmp_path / "pkg", capsys)
+    assert rc == 0, err
+
+
+def test_a_truncated_png_is_refused_naming_it(world, tmp_path, capsys):
+    args = colmap_args(world, tmp_path)
+    link_images(world, tmp_path / "images")
+    png = tmp_path / "images" / "000002.png"
+    data = png.read_bytes()
+    png.unlink()
+    png.write_bytes(data[: len(data) // 2])  # the header reads, the pixels run out
+    out = tmp_path / "pkg"
+    assert_refused(*run_import(args, out, capsys), out, "000002.png", "image_id 3", "truncated")
+
+
+def test_a_value_no_package_may_hold_is_named_by_the_input_not_the_temporary_package(world, tmp_path, capsys):
+    def edit(d):
+        d["cx"] = 1e12
+
+    out = tmp_path / "pkg"
+    rc, err = run_import([*_edit_ns(world, tmp_path, edit), "--quiet"], out, capsys)  # no progress bar
+    assert_refused(rc, err, out, "transforms.json: ", ".K: ", "in the scene package made from this input")
+    assert ".part" not in err and "manifest.json" not in err

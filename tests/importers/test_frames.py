@@ -27,6 +27,11 @@ def test_natural_order():
     assert sorted(["img10.png", "img9.png", "img100.png"], key=natural_key) == ["img9.png", "img10.png", "img100.png"]
 
 
+def test_digits_that_are_no_decimal_number_sort_as_text():
+    """A superscript or circled digit is a digit to str.isdigit but no number to int()."""
+    assert sorted(["2", "\u00b2", "1\u00b2", "10"], key=natural_key) == ["1\u00b2", "2", "10", "\u00b2"]
+
+
 def test_frames_without_recorded_times_are_timed_by_their_numbers_so_a_gap_stays_a_gap():
     assert frame_times(["000000", "000001", "000003", "000004"], 10.0) == [0.0, 0.1, 0.3, 0.4]
     assert frame_times(["data/0000000007", "data/0000000009"], 2.0) == [0.0, 1.0]  # from the first frame

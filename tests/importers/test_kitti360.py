@@ -243,6 +243,14 @@ def test_one_camera_and_a_window(root, tmp_path):
     assert main(["validate", str(out), "--allow-external-assets"]) == 0
 
 
+def test_the_first_camera_named_is_the_packages_first(root, tmp_path):
+    out = tmp_path / "pkg"
+    assert main(["import", "kitti-360", str(root), "--sequence", SEQ, "--out", str(out), "--cameras", "1,0",
+                 "--quiet"]) == 0
+    m = load_manifest(out)
+    assert [c.name for c in m.cameras] == ["image_01", "image_00"] and m.ground_truth["camera"] == "image_01"
+
+
 # ---------------------------------------------------------------- the official loaders
 
 
@@ -344,3 +352,11 @@ def test_no_frame_with_a_pose(bad, tmp_path, capsys):
 
 def test_fisheye_camera_refused(bad, tmp_path, capsys):
     refused(bad, tmp_path, capsys, "--cameras", "perspective cameras are 0, 1", args=("--cameras", "0,2"))
+
+
+def test_an_image_of_another_size_than_its_camera_is_refused_naming_it(bad, tmp_path, capsys):
+    """The first camera's images are read for the LiDAR's colours before the package checks them."""
+    image = bad / "data_2d_raw" / SEQ / "image_00" / "data_rect" / "0000000001.png"
+    write_image(image, np.zeros((HEIGHT, WIDTH - 1, 3), np.float32))
+    refused(bad, tmp_path, capsys, "image_00/data_rect/0000000001.png", f"image is {WIDTH - 1}x{HEIGHT}",
+            f"is {WIDTH}x{HEIGHT}")

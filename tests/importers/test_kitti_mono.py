@@ -282,3 +282,11 @@ def test_no_image_folder_is_refused_naming_the_sequence(tmp_path, capsys):
     out = tmp_path / "pkg"
     rc = main(["import", "kitti", str(seq), "--out", str(out), "--camera-height", "1.6"])
     assert_refused(rc, capsys.readouterr().err.strip(), out, "SEQUENCE_DIR", "no image folder (image_2, image_0")
+
+
+def test_an_image_named_by_a_digit_that_is_no_number_is_not_a_frame(tmp_path, capsys):
+    """``².png`` is a digit to str.isdigit but no frame number: not read, as any other name."""
+    seq = write_sequence(tmp_path / "seq")
+    (seq / "image_2" / "\u00b2.png").write_bytes((seq / "image_2" / "000001.png").read_bytes())
+    m, _ = import_sequence(seq, tmp_path / "pkg", capsys)
+    assert len(m.frames) == FRAMES

@@ -307,6 +307,17 @@ def test_one_camera(drive, tmp_path):
     assert main(["validate", str(out), "--allow-external-assets"]) == 0
 
 
+def test_the_first_camera_named_is_the_packages_first(drive, tmp_path):
+    out = tmp_path / "pkg"
+    assert main(["import", "kitti-raw", str(drive), "--out", str(out), "--cameras", "3,2", "--quiet"]) == 0
+    m = load_manifest(out)
+    assert [c.name for c in m.cameras] == ["image_03", "image_02"]
+    assert m.ground_truth["camera"] == "image_03"
+    T = np.asarray(m.source["transform"])
+    for c, i in zip(m.cameras, (3, 2)):
+        assert np.abs(invert_rigid(T) @ c.frames[4].camera_to_world - world_from_camera(i, 4)).max() < TOL_M
+
+
 # ---------------------------------------------------------------- bad input
 
 
@@ -375,3 +386,24 @@ def test_camera_without_images(bad, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "image_01" in err and "--cameras" in err, err
     assert not (tmp_path / "pkg").exists()
+
+
+def test_an_image_of_another_size_than_its_camera_is_refused_naming_it(bad, tmp_path, capsys):
+    """The first camera's images are read for the LiDAR's colours before the package checks them."""
+    write_image(bad / "image_02" / "data" / "0000000001.png", np.zeros((HEIGHT, WIDTH - 1, 3), np.float32))
+    refused(bad, tmp_path, capsys, "image_02/data/0000000001.png", f"image is {WIDTH - 1}x{HEIGHT}",
+            f"is {WIDTH}x{HEIGHT}")
+
+
+@pytest.mark.parametrize("index, value", [(0, "90"), (0, "-91"), (1, "181"), (2, "1e308")])
+def test_an_oxts_fix_that_is_no_place_on_earth_is_refused_naming_the_file(bad, tmp_path, capsys, index, value):
+    path = bad / "oxts" / "data" / "0000000003.txt"
+    fields = path.read_text().split()
+    fields[index] = value
+    path.write_text(" ".join(fields) + "\n")
+    refused(bad, tmp_path, capsys, "0000000003.txt", ": line 1: ", "no fix on Earth")
+
+
+def test_an_empty_scan_is_refused_naming_it(bad, tmp_path, capsys):
+    (bad / "velodyne_points" / "data" / "0000000002.bin").write_bytes(b"")
+    refused(bad, tmp_path, capsys, "0000000002.bin", ": points: ", "0 bytes")

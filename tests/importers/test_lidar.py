@@ -157,6 +157,7 @@ def test_scans_drop_non_finite_points(tmp_path):
     (lambda scans, calib: (scans / "17.npz").unlink(), "SCANS_DIR"),
     (lambda scans, calib: (scans / "25.ply").write_bytes((scans / "25.ply").read_bytes()[:-7]), "element vertex"),
     (lambda scans, calib: (scans / "3.bin").write_bytes(b"\0" * 20), "points"),
+    (lambda scans, calib: (scans / "3.bin").write_bytes(b""), "points"),
     (lambda scans, calib: np.savez(scans / "12.npz", xyz=np.zeros((4, 3))), "points"),
     (lambda scans, calib: calib.write_text(" ".join(["2"] * 12)), "transform"),
     (lambda scans, calib: calib.write_text("Tr_velo_to_cam: 1 0 0\n"), "Tr_velo_to_cam"),

@@ -436,3 +436,9 @@ def test_an_unknown_scene_lists_the_scenes(dataroot, tmp_path, capsys):
 def test_a_channel_the_scene_lacks(dataroot, tmp_path, capsys):
     refused(dataroot, tmp_path, capsys, "sample_data.json", "--cameras", "no keyframe of CAM_FRONT_RIGHT",
             "has: CAM_BACK, CAM_FRONT, LIDAR_TOP", args=())  # the default: all six
+
+
+def test_a_file_name_holding_a_nul_byte_is_refused_naming_the_field(bad, tmp_path, capsys):
+    sd = token("sd", "CAM_FRONT", 1)
+    edit(bad, "sample_data", sd, filename="samples/CAM_FRONT/a\u0000b.jpg")
+    refused(bad, tmp_path, capsys, "sample_data.json", f"[{sd}].filename", "NUL byte")

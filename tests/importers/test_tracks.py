@@ -317,6 +317,7 @@ BAD_JSON = [
     ("world", [good_track(boxes=[box(yaw=None, quaternion=[0, 0, 0, 0])])], "tracks[0].boxes[0].quaternion", "zero"),
     ("world", [good_track(boxes=[box(quaternion=[1, 0, 0, 0])])], "tracks[0].boxes[0]", "one of yaw or quaternion"),
     ("world", [good_track(boxes=[box(), box()])], "tracks[0].boxes[1].frame", "frame 1 already"),
+    ("world", [good_track(boxes=[])], "tracks[0].boxes", "no boxes"),
     ("world", [good_track(boxes=[box(frame=-1)])], "tracks[0].boxes[0].frame", "integer >= 0"),
     ("world", [good_track(boxes=[box(pitch=0.1)])], "tracks[0].boxes[0].pitch", "unknown field"),
     ("world", [good_track(id="../car")], "tracks[0].id", "'/'"),
