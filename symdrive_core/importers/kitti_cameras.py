@@ -50,9 +50,10 @@ def camera_frames(drive: Path, cameras: tuple[int, ...], sub: str) -> dict[int, 
     for i in cameras[1:]:
         missing = sorted(set(out[first]) ^ set(out[i]))
         if missing:
-            has = camera_name(first) if missing[0] in out[first] else camera_name(i)
-            raise InputError(drive / has / sub / f"{missing[0]}.png", "frame not recorded by every camera chosen "
-                             f"({', '.join(camera_name(c) for c in cameras)})", "--cameras")
+            has, lacks = (first, i) if missing[0] in out[first] else (i, first)
+            raise InputError(drive / camera_name(lacks) / sub, f"no {missing[0]}.png, which {camera_name(has)} "
+                             f"records: every camera chosen ({', '.join(camera_name(c) for c in cameras)}) must "
+                             "record each frame", "--cameras")
     return out
 
 

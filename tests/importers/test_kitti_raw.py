@@ -407,3 +407,8 @@ def test_an_oxts_fix_that_is_no_place_on_earth_is_refused_naming_the_file(bad, t
 def test_an_empty_scan_is_refused_naming_it(bad, tmp_path, capsys):
     (bad / "velodyne_points" / "data" / "0000000002.bin").write_bytes(b"")
     refused(bad, tmp_path, capsys, "0000000002.bin", ": points: ", "0 bytes")
+
+
+def test_a_frame_one_camera_lacks_is_named_at_that_camera(bad, tmp_path, capsys):
+    (bad / "image_03" / "data" / "0000000004.png").unlink()
+    refused(bad, tmp_path, capsys, "image_03/data: --cameras: no 0000000004.png, which image_02 records")
