@@ -76,22 +76,6 @@ def check_image(image: Path, width: int, height: int, source: Path, where: str) 
     w, h, _ = image_size(image, where)
     if (w, h) != (width, height):
         raise InputError(image, f"image is {w}x{h}, the camera ({source}: {where}) is {width}x{height}", where)
-    if _truncated_png(image):
-        raise InputError(image, "truncated: a PNG without its end chunk (IEND), as a copy cut off writes it", where)
-
-
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-PNG_END = b"IEND\xaeB`\x82"  # the end chunk's type and CRC: the last 8 bytes of a whole PNG
-
-
-def _truncated_png(image: Path) -> bool:
-    """A PNG whose last KB holds no end chunk: its header reads, its pixels run out (a header
-    check alone lets it into the package, and the first reader of its pixels fails)."""
-    with open(image, "rb") as f:
-        if f.read(len(PNG_SIGNATURE)) != PNG_SIGNATURE:
-            return False
-        f.seek(max(f.seek(0, os.SEEK_END) - 1024, 0))
-        return PNG_END not in f.read()
 
 
 def _check_images(g: Grouped, lateral: StereoTruth | None) -> None:

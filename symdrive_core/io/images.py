@@ -32,10 +32,25 @@ def _oiio():
 MAX_IMAGE_SIDE = 16384
 
 
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_END = b"IEND\xaeB`\x82"  # the end chunk's type and CRC: the last 8 bytes of a whole PNG
+
+
+def _truncated_png(path: Path) -> bool:
+    """A PNG whose last KB holds no end chunk: its header reads, its pixels run out (a header
+    check alone lets it through, and the first reader of its pixels fails)."""
+    with open(path, "rb") as f:
+        if f.read(len(PNG_SIGNATURE)) != PNG_SIGNATURE:
+            return False
+        f.seek(max(f.seek(0, os.SEEK_END) - 1024, 0))
+        return PNG_END not in f.read()
+
+
 def image_size(path: str | os.PathLike, field: str | None = None) -> tuple[int, int, int]:
     """(width, height, channels) from an image file's header alone; nothing is decoded.
 
-    Only regular files are opened, and a side larger than ``MAX_IMAGE_SIDE`` is an error.
+    Only regular files are opened, a side larger than ``MAX_IMAGE_SIDE`` is an error, and so is a
+    PNG cut off before its end chunk (its last KB is read, not its pixels).
     """
     path = Path(path)
     check_regular(path, field)
@@ -53,6 +68,8 @@ def image_size(path: str | os.PathLike, field: str | None = None) -> tuple[int, 
     if width > MAX_IMAGE_SIDE or height > MAX_IMAGE_SIDE:
         raise InputError(path, f"image is {width}x{height}; sides above {MAX_IMAGE_SIDE} pixels are not read",
                          field)
+    if _truncated_png(path):
+        raise InputError(path, "truncated: a PNG without its end chunk (IEND), as a copy cut off writes it", field)
     return width, height, channels
 
 

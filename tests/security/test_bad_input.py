@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from symdrive_core.cli import main
 from symdrive_core.errors import InputError
-from symdrive_core.io.images import read_image
+from symdrive_core.io.images import read_image, write_image
 from symdrive_core.scene import load_manifest
 from symdrive_core.scene.manifest import SCHEMA_PATH
 
@@ -197,6 +197,18 @@ def test_image_declaring_a_huge_size(make_package, capsys, tmp_path, side, messa
     code, err = _cli(capsys, "validate", manifest)
     _one_line_naming(code, err, str(manifest), "cameras[0].frames[0].image: huge.png")
     assert re.search(message, err), err
+
+
+def test_a_png_cut_off_before_its_end_is_refused_by_validate(make_package, capsys):
+    manifest = make_package()
+    d = json.loads(manifest.read_text())
+    cam = d["cameras"][0]
+    image = write_image(manifest.parent / "front.png", np.random.default_rng(0).random((cam["height"], cam["width"], 3)))
+    image.write_bytes(image.read_bytes()[: image.stat().st_size // 2])  # the header reads, the pixels run out
+    cam["frames"][0]["image"] = image.name
+    manifest.write_text(json.dumps(d))
+    code, err = _cli(capsys, "validate", manifest)
+    _one_line_naming(code, err, image.name, "cameras[0].frames[0].image", "truncated")
 
 
 # ------------------------------------------------------------------ names are names, by property
